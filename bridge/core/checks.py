@@ -1,0 +1,265 @@
+"""Whole-mapping checks: keys, addresses, references, options, function codes, overlaps.
+
+Each check returns rows ``entities.<key>.<field>: message``; ``check_mapping`` runs them all
+so a user sees every problem of a file at once.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from collections.abc import Iterator
+from collections.abc import Mapping as AnyMapping
+from typing import TYPE_CHECKING
+
+from bridge.core.address import to_wire
+from bridge.core.entity import Access, DataType, Entity, Table
+from bridge.core.protocol import Protocol
+
+if TYPE_CHECKING:
+    from bridge.core.mapping import Mapping
+
+KEY_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
+_MAX_VARIANTS = 256
+_UNSIGNED_MAX = {DataType.U32: 0xFFFFFFFF, DataType.S32: 0xFFFFFFFF, DataType.F32: 0xFFFFFFFF}
+
+
+def when_matches(when: AnyMapping[str, str | list[str]], chosen: AnyMapping[str, str]) -> bool:
+    """True when every option named in ``when`` has one of the listed values."""
+    for option, wanted in when.items():
+        values = [wanted] if isinstance(wanted, str) else wanted
+        if chosen.get(option) not in values:
+            return False
+    return True
+
+
+def apply_variants(entity: Entity, chosen: AnyMapping[str, str]) -> Entity:
+    """The entity as configured: the first variant matching the option values applies."""
+    for variant in entity.variants:
+        if when_matches(variant.when, chosen):
+            return entity.with_variant(variant)
+    return entity
+
+
+def write_function(entity: Entity, protocol: Protocol) -> int:
+    """The function code a write of ``entity`` uses: explicit, else by table and width."""
+    if entity.write_function is not None:
+        return entity.write_function
+    supported = protocol.function_codes
+    if entity.table is Table.COIL:
+        return 5 if 5 in supported else 15
+    if entity.register_count == 1 and 6 in supported:
+        return 6
+    return 16
+
+
+def check_mapping(mapping: Mapping) -> list[str]:
+    """Every cross-entity problem of ``mapping``, as ``location: message`` rows."""
+    rows: list[str] = []
+    for check in (_keys, _addresses, _options, _references, _function_codes, _sentinels):
+        rows.extend(check(mapping))
+    if not rows:  # overlap checks need valid addresses and options
+        rows.extend(_overlaps(mapping))
+    if mapping.status is not None and mapping.status not in mapping.entities:
+        rows.append(f"status: no entity {mapping.status!r}")
+    return rows
+
+
+def _keys(mapping: Mapping) -> Iterator[str]:
+    for key in mapping.entities:
+        if not KEY_PATTERN.match(key):
+            yield f"entities.{key}: keys are snake_case (a-z, 0-9, _), starting with a letter"
+
+
+def _addresses(mapping: Mapping) -> Iterator[str]:
+    rule = mapping.protocol.addressing
+    for key, e in mapping.entities.items():
+        for name, printed in (("address", e.address), ("write_address", e.write_address)):
+            if printed is None:
+                continue
+            try:
+                wire = to_wire(printed, rule)
+            except ValueError as exc:
+                yield f"entities.{key}.{name}: {exc}"
+                continue
+            if name == "address" and wire + e.register_count > 0x10000:
+                yield f"entities.{key}.address: the value runs past address 65535"
+    ranges = [("segments", s.start, s.end) for s in mapping.protocol.segments]
+    ranges += [("reserved", r.start, r.end or r.start) for r in mapping.protocol.reserved]
+    for index, (name, start, end) in enumerate(ranges):
+        try:
+            if to_wire(start, rule) > to_wire(end, rule):
+                yield f"protocol.{name}: start {start!r} is after end {end!r}"
+        except ValueError as exc:
+            yield f"protocol.{name}[{index}]: {exc}"
+
+
+def _options(mapping: Mapping) -> Iterator[str]:
+    for name, spec in mapping.options.items():
+        if spec.default not in spec.choices:
+            yield f"options.{name}.default: {spec.default!r} is not one of {list(spec.choices)}"
+    for key, e in mapping.entities.items():
+        for index, variant in enumerate(e.variants):
+            yield from _when_problems(mapping, f"entities.{key}.variants.{index}", variant.when)
+            try:
+                e.with_variant(variant)
+            except ValueError as exc:  # pydantic's ValidationError is a ValueError
+                yield f"entities.{key}.variants.{index}: {exc}"
+        yield from _when_problems(mapping, f"entities.{key}", e.when)
+
+
+def _when_problems(
+    mapping: Mapping, location: str, when: AnyMapping[str, str | list[str]]
+) -> Iterator[str]:
+    for option, wanted in when.items():
+        if option not in mapping.options:
+            yield f"{location}.when: unknown option {option!r}"
+            continue
+        for value in [wanted] if isinstance(wanted, str) else wanted:
+            if value not in mapping.options[option].choices:
+                yield f"{location}.when: {option}={value!r} is not a choice"
+
+
+def _references(mapping: Mapping) -> Iterator[str]:
+    entities = mapping.entities
+    wants = {
+        "unit_from": ("enum", "an enum entity"),
+        "sign_from": ("sign", "a 1-bit field of a register"),
+        "min_from": ("number", "a number entity"),
+        "max_from": ("number", "a number entity"),
+    }
+    for key, e in entities.items():
+        for field_name, (kind, description) in wants.items():
+            ref = getattr(e, field_name)
+            if ref is None:
+                continue
+            target = entities.get(ref)
+            if target is None:
+                yield f"entities.{key}.{field_name}: no entity {ref!r}"
+            elif not _is_kind(target, kind):
+                yield f"entities.{key}.{field_name}: {ref!r} must be {description}"
+            elif not target.readable:
+                yield f"entities.{key}.{field_name}: {ref!r} must be readable"
+            elif not _implies(e.when, target.when, mapping):
+                yield f"entities.{key}.{field_name}: {ref!r} is missing for some option values"
+
+
+def _is_kind(entity: Entity, kind: str) -> bool:
+    if kind == "sign":
+        return entity.field_width == 1 and entity.enum is None
+    return entity.kind == kind
+
+
+def _implies(
+    when: AnyMapping[str, str | list[str]],
+    other: AnyMapping[str, str | list[str]],
+    mapping: Mapping,
+) -> bool:
+    return all(
+        when_matches(other, chosen) for chosen in _variants(mapping) if when_matches(when, chosen)
+    )
+
+
+def _variants(mapping: Mapping) -> Iterator[dict[str, str]]:
+    names = list(mapping.options)
+    choices = [mapping.options[name].choices for name in names]
+    for combo in itertools.islice(itertools.product(*choices), _MAX_VARIANTS):
+        yield dict(zip(names, combo, strict=True))
+
+
+def _function_codes(mapping: Mapping) -> Iterator[str]:
+    supported = mapping.protocol.function_codes
+    for key, e in mapping.entities.items():
+        if e.readable and e.table.read_function not in supported:
+            yield (
+                f"entities.{key}.table: reading {e.table.value} needs function "
+                f"{e.table.read_function}, which the device does not support"
+            )
+        if e.writable:
+            code = write_function(e, mapping.protocol)
+            if code not in supported:
+                yield f"entities.{key}.access: a write needs function {code}, not supported"
+            if e.table.is_bits != (code in (5, 15)):
+                yield f"entities.{key}.write_function: {code} does not write {e.table.value}"
+            if code in (5, 6) and e.register_count > 1:
+                yield f"entities.{key}.write_function: {code} writes one register only"
+
+
+def _sentinels(mapping: Mapping) -> Iterator[str]:
+    for key, e in mapping.entities.items():
+        top = _UNSIGNED_MAX.get(e.data_type, 0xFFFF)
+        for raw in e.sentinels:
+            if not 0 <= raw <= top:
+                yield f"entities.{key}.sentinels: {raw} is outside the raw range 0..{top}"
+
+
+def _overlaps(mapping: Mapping) -> Iterator[str]:
+    seen: set[str] = set()
+    for chosen in _variants(mapping):
+        for row in _overlaps_for(mapping, chosen):
+            if row not in seen:
+                seen.add(row)
+                yield row
+
+
+def _overlaps_for(mapping: Mapping, chosen: dict[str, str]) -> Iterator[str]:
+    rule = mapping.protocol.addressing
+    owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]] = {}
+    for key, e in mapping.entities.items():
+        if e.access is Access.WRITE or not when_matches(e.when, chosen):
+            continue
+        start = to_wire(e.address, rule)
+        for offset in range(e.register_count):
+            owners.setdefault((e.table, start + offset), []).append((key, e, start))
+    yield from _reserved_hits(mapping, owners)
+    yield from _segment_crossings(mapping, owners)
+    for (table, address), items in sorted(owners.items()):
+        for (k1, e1, s1), (k2, e2, s2) in itertools.combinations(items, 2):
+            problem = _clash(e1, s1, e2, s2)
+            if problem:
+                yield f"entities.{k2}.address: {problem} with {k1!r} at {table.value} {address}"
+
+
+def _clash(e1: Entity, s1: int, e2: Entity, s2: int) -> str | None:
+    """Why two readable entities on one address make no sense together, if they don't."""
+    if e1.on_when is not None or e2.on_when is not None:
+        return None  # a derived boolean view of a value, e.g. "protection enabled"
+    w1, w2 = e1.field_width, e2.field_width
+    if w1 is None and w2 is None:
+        return "a second whole value on the same register"
+    if e1.register_count > 1 or e2.register_count > 1 or s1 != s2:
+        return "a bit field inside a multi-register value"
+    if w1 is not None and w2 is not None:
+        bits1 = set(range(e1.bit or 0, (e1.bit or 0) + w1))
+        bits2 = set(range(e2.bit or 0, (e2.bit or 0) + w2))
+        if bits1 & bits2:
+            return "overlapping bit fields"
+    return None
+
+
+def _reserved_hits(
+    mapping: Mapping, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
+) -> Iterator[str]:
+    rule = mapping.protocol.addressing
+    for r in mapping.protocol.reserved:
+        start, end = to_wire(r.start, rule), to_wire(r.end or r.start, rule)
+        for address in range(start, end + 1):
+            for key, _, _ in owners.get((r.table, address), []):
+                yield f"entities.{key}.address: reads reserved {r.table.value} {address}"
+
+
+def _segment_crossings(
+    mapping: Mapping, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
+) -> Iterator[str]:
+    rule = mapping.protocol.addressing
+    bounds = [
+        (s.table, to_wire(s.start, rule), to_wire(s.end, rule)) for s in mapping.protocol.segments
+    ]
+    for (table, address), items in owners.items():
+        for key, e, start in items:
+            if address != start:
+                continue
+            last = start + e.register_count - 1
+            for seg_table, low, high in bounds:
+                if seg_table is table and (low <= start <= high) != (low <= last <= high):
+                    yield f"entities.{key}.address: the value crosses a segment boundary"

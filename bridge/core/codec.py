@@ -1,0 +1,328 @@
+"""Registers and bits <-> values. Pure functions; nothing here mutates its input.
+
+The codec reads from a register *image*: a mapping ``(table, wire address) -> word`` (or
+0/1 for bit tables) holding what was last read from a device. ``decode(point, image)``
+returns the engineering value of one point (``None`` for a sentinel or an enum value the
+mapping does not know); ``encode(point, value, image)`` returns the writes that put
+``value`` on the device, or raises ``ValueRejectedError`` and nothing is written.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Mapping as AnyMapping
+from collections.abc import Sequence
+from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
+
+from bridge.core.entity import DataType, Entity, Order, Table
+from bridge.core.mapping import Point
+from bridge.core.request import Write
+from bridge.errors import MissingDataError, ValueRejectedError
+
+Image = AnyMapping[tuple[Table, int], int]
+Value = bool | int | float | str | None
+
+_TRUE = {"on", "true", "1", "yes", "press", "open"}
+_FALSE = {"off", "false", "0", "no", "closed"}
+
+
+# --- raw words <-> integers -----------------------------------------------------------
+
+
+def words_of(point: Point, image: Image) -> tuple[int, ...]:
+    """The raw words (or bits) of ``point``; MissingDataError if any has not been read."""
+    try:
+        return tuple(image[(point.table, address)] for address in point.span)
+    except KeyError as exc:
+        table, address = exc.args[0]
+        raise MissingDataError(f"{point.key}: {table.value} {address} has not been read") from None
+
+
+def join_words(words: Sequence[int], order: Order, radix: int = 65536) -> int:
+    """Combine two words (high word first for ``big``) into one unsigned integer."""
+    high, low = (words[0], words[1]) if order is Order.BIG else (words[1], words[0])
+    return high * radix + low
+
+
+def split_words(number: int, order: Order, radix: int = 65536) -> tuple[int, int]:
+    high, low = divmod(number, radix)
+    return (high, low) if order is Order.BIG else (low, high)
+
+
+def _swap_bytes(word: int) -> int:
+    return ((word & 0xFF) << 8) | (word >> 8)
+
+
+def _to_bytes(words: Sequence[int], byte_order: Order) -> bytes:
+    if byte_order is Order.LITTLE:
+        words = [_swap_bytes(w) for w in words]
+    return b"".join(w.to_bytes(2, "big") for w in words)
+
+
+def _from_bytes(data: bytes, byte_order: Order) -> tuple[int, ...]:
+    words = [int.from_bytes(data[i : i + 2], "big") for i in range(0, len(data), 2)]
+    return tuple(_swap_bytes(w) if byte_order is Order.LITTLE else w for w in words)
+
+
+def unsigned_raw(entity: Entity, words: Sequence[int]) -> int:
+    """The raw unsigned integer the words carry (before sign, field, scale)."""
+    if entity.register_count == 2:
+        ordered = _from_bytes(_to_bytes(words, entity.byte_order), Order.BIG)
+        return join_words(ordered, entity.word_order, entity.word_radix)
+    word = words[0]
+    return _swap_bytes(word) if entity.byte_order is Order.LITTLE else word
+
+
+def raw_bounds(entity: Entity) -> tuple[int, int]:
+    """Inclusive range of the integer an entity stores (after field and sign handling)."""
+    if entity.field_width is not None:
+        return 0, (1 << entity.field_width) - 1
+    return {
+        DataType.U16: (0, 0xFFFF),
+        DataType.S16: (-0x8000, 0x7FFF),
+        DataType.U32: (0, 0xFFFF * entity.word_radix + entity.word_radix - 1),
+        DataType.S32: (-0x80000000, 0x7FFFFFFF),
+        DataType.BOOL: (0, 1),
+    }.get(entity.data_type, (0, 0))
+
+
+def to_signed(raw: int, bits: int) -> int:
+    return raw - (1 << bits) if raw >= 1 << (bits - 1) else raw
+
+
+# --- decode ---------------------------------------------------------------------------
+
+
+def decode(point: Point, image: Image) -> Value:
+    """The engineering value of ``point`` from the image."""
+    entity = point.entity
+    words = words_of(point, image)
+    kind = entity.data_type
+    if kind is DataType.ASCII:
+        text = _to_bytes(words, entity.byte_order).decode("latin-1")
+        return text.rstrip("\x00 ").lstrip("\x00")
+    if kind is DataType.BOOL:
+        return _finish(entity, int(bool(words[0])))
+    unsigned = unsigned_raw(entity, words)
+    if unsigned in entity.sentinels:
+        return None
+    if kind is DataType.F32:
+        number = struct.unpack(">f", unsigned.to_bytes(4, "big"))[0]
+        return None if math.isnan(number) else round(number, 6)
+    raw = _integer(entity, unsigned)
+    if entity.kind == "number" and point.sign is not None and decode(point.sign, image):
+        raw = -raw
+    return _finish(entity, raw)
+
+
+def _integer(entity: Entity, unsigned: int) -> int:
+    if entity.field_width is not None:
+        return (unsigned >> (entity.bit or 0)) & ((1 << entity.field_width) - 1)
+    if entity.data_type is DataType.S16:
+        return to_signed(unsigned, 16)
+    if entity.data_type is DataType.S32:
+        return to_signed(unsigned, 32)
+    return unsigned
+
+
+def _finish(entity: Entity, raw: int) -> Value:
+    if entity.on_when is not None:
+        low, high = entity.on_when.min, entity.on_when.max
+        return (low is None or raw >= low) and (high is None or raw <= high)
+    if entity.enum is not None:
+        return entity.enum.get(raw)
+    if entity.kind == "bool":
+        return bool(raw)
+    return scale_value(entity, raw)
+
+
+def scale_value(entity: Entity, raw: int) -> int | float:
+    """raw * scale + offset, exact in decimal, as an int when the entity has no decimals."""
+    exact = Decimal(raw) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
+    if entity.decimals == 0:
+        return int(exact.to_integral_value(ROUND_HALF_UP))
+    return float(round(exact, entity.decimals))
+
+
+def unscale_value(entity: Entity, value: float) -> int:
+    """(value - offset) / scale rounded half away from zero: 4.5 bar at 0.1 -> 45, not 44."""
+    try:
+        exact = (Decimal(repr(float(value))) - Decimal(repr(entity.offset))) / Decimal(
+            repr(entity.scale)
+        )
+    except InvalidOperation:
+        raise ValueRejectedError(f"{value!r} is not a finite number") from None
+    return int(exact.to_integral_value(ROUND_HALF_UP))
+
+
+def unit_of(point: Point, image: Image) -> str | None:
+    """The unit of ``point``: fixed in the mapping, or the label of its unit register."""
+    if point.unit_source is None:
+        return point.entity.unit
+    try:
+        label = decode(point.unit_source, image)
+    except MissingDataError:
+        return None
+    return label if isinstance(label, str) else None
+
+
+def limits_of(point: Point, image: Image) -> tuple[float | None, float | None]:
+    """Engineering limits: static min/max, tightened by limit registers when read."""
+    entity = point.entity
+    low, high = entity.min, entity.max
+    for source, is_low in ((point.min_source, True), (point.max_source, False)):
+        if source is None:
+            continue
+        bound = decode(source, image)
+        if not isinstance(bound, int | float) or isinstance(bound, bool):
+            continue
+        if is_low:
+            low = bound if low is None else max(low, bound)
+        else:
+            high = bound if high is None else min(high, bound)
+    return low, high
+
+
+# --- encode ---------------------------------------------------------------------------
+
+
+def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
+    """The writes that set ``point`` to ``value``; ValueRejectedError if it is not allowed."""
+    entity = point.entity
+    if not entity.writable:
+        raise ValueRejectedError(f"{point.key} is read-only")
+    if entity.press is not None:
+        value = entity.press
+    kind = entity.data_type
+    if kind is DataType.ASCII:
+        return (_register_write(point, _encode_text(entity, value)),)
+    if kind is DataType.F32:
+        number = _number(point, value, image)
+        packed = struct.unpack(">HH", struct.pack(">f", number))
+        return (_register_write(point, _ordered(entity, join_words(packed, Order.BIG))),)
+    raw = _raw_for(point, value, image)
+    if kind is DataType.BOOL:
+        return _coil_writes(point, raw)
+    writes: list[Write] = []
+    if point.sign is not None:
+        if decode(point.sign, image) != (raw < 0):  # sign first, then magnitude
+            writes.extend(encode_field(point.sign, int(raw < 0), image))
+        raw = abs(raw)
+    if entity.field_width is not None:
+        if entity.pulse:
+            return encode_field(point, 1, image) + encode_field(point, 0, image, after=1)
+        return tuple(writes) + encode_field(point, raw, image)
+    bits = 32 if entity.register_count == 2 else 16
+    unsigned = raw & ((1 << bits) - 1)  # two's complement for signed types
+    if unsigned in entity.sentinels:
+        raise ValueRejectedError(f"{point.key}: {value!r} is the device's 'unknown' marker")
+    writes.append(_register_write(point, _ordered(entity, unsigned)))
+    return tuple(writes)
+
+
+def encode_field(
+    point: Point, raw: int, image: Image, after: int | None = None
+) -> tuple[Write, ...]:
+    """Write one bit/nibble field, keeping the other bits of the word (read-modify-write).
+
+    ``after`` is the field value an earlier write in the same command left behind (pulses).
+    """
+    entity = point.entity
+    bit, width = entity.bit or 0, entity.field_width or 1
+    words = words_of(point, image)
+    mask = ((1 << width) - 1) << bit
+    current = words[0] if after is None else (words[0] & ~mask) | (after << bit)
+    word = (current & ~mask) | (raw << bit)
+    return (_register_write(point, (word,)),)
+
+
+def _raw_for(point: Point, value: object, image: Image) -> int:
+    entity = point.entity
+    if entity.enum is not None:
+        return _enum_raw(point, value)
+    if entity.kind == "bool":
+        return int(parse_bool(point.key, value))
+    number = _number(point, value, image)
+    raw = unscale_value(entity, number)
+    low, high = raw_bounds(entity)
+    magnitude_low = -high if point.sign is not None else low
+    if not magnitude_low <= raw <= high:
+        raise ValueRejectedError(f"{point.key}: {value!r} does not fit the register")
+    return raw
+
+
+def _enum_raw(point: Point, value: object) -> int:
+    enum = point.entity.enum or {}
+    if isinstance(value, str):
+        for raw, label in enum.items():
+            if label == value or label.casefold() == value.strip().casefold():
+                return raw
+    if isinstance(value, int) and not isinstance(value, bool) and value in enum:
+        return value
+    options = ", ".join(repr(label) for label in enum.values())
+    raise ValueRejectedError(f"{point.key}: {value!r} is not one of {options}")
+
+
+def parse_bool(key: str, value: object) -> bool:
+    """ON/OFF, true/false, 1/0 (any case) -> bool."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    if isinstance(value, str) and value.strip().casefold() in _TRUE | _FALSE:
+        return value.strip().casefold() in _TRUE
+    raise ValueRejectedError(f"{key}: {value!r} is not ON/OFF")
+
+
+def _number(point: Point, value: object, image: Image) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise ValueRejectedError(f"{point.key}: {value!r} is not a number")
+    try:
+        number = float(value)
+    except ValueError:
+        raise ValueRejectedError(f"{point.key}: {value!r} is not a number") from None
+    if not math.isfinite(number):
+        raise ValueRejectedError(f"{point.key}: {value!r} is not a finite number")
+    low, high = limits_of(point, image)
+    if (low is not None and number < low) or (high is not None and number > high):
+        raise ValueRejectedError(f"{point.key}: {value!r} is outside {low}..{high}")
+    return number
+
+
+def _encode_text(entity: Entity, value: object) -> tuple[int, ...]:
+    if not isinstance(value, str):
+        raise ValueRejectedError(f"{value!r} is not text")
+    try:
+        data = value.encode("ascii")
+    except UnicodeEncodeError:
+        raise ValueRejectedError(f"{value!r} is not ASCII text") from None
+    size = entity.register_count * 2
+    if len(data) > size:
+        raise ValueRejectedError(f"{value!r} is longer than {size} characters")
+    return _from_bytes(data.ljust(size, b"\x00"), entity.byte_order)
+
+
+def _ordered(entity: Entity, unsigned: int) -> tuple[int, ...]:
+    if entity.register_count == 2:
+        words = split_words(unsigned, entity.word_order, entity.word_radix)
+        return _from_bytes(_to_bytes(words, Order.BIG), entity.byte_order)
+    return (_swap_bytes(unsigned) if entity.byte_order is Order.LITTLE else unsigned,)
+
+
+def _register_write(point: Point, words: tuple[int, ...]) -> Write:
+    function = point.write_function or (6 if len(words) == 1 else 16)
+    return Write(function, point.table, point.write_address, words)
+
+
+def _coil_writes(point: Point, raw: int) -> tuple[Write, ...]:
+    function = point.write_function or 5
+    if function == 15:
+        return (Write(15, Table.COIL, point.write_address, (raw,)),)
+    value = point.coil_on_value if raw else 0
+    if point.entity.pulse:
+        return (
+            Write(5, Table.COIL, point.write_address, (point.coil_on_value,)),
+            Write(5, Table.COIL, point.write_address, (0,)),
+        )
+    return (Write(5, Table.COIL, point.write_address, (value,)),)

@@ -1,0 +1,390 @@
+"""One entity of a mapping: where its value lives, how it is typed, and how Home Assistant shows it.
+
+An entity is a value a user sees (a sensor, a setting, an alarm bit, a command). Several
+entities may share a register: bit and nibble fields of one status word, or a whole word
+next to its bits. Field checks that need no other entity live here; cross-entity checks
+(references, overlaps, function codes) live in ``mapping.py``.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Any, Self
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from bridge.core.address import PrintedAddress
+
+
+class Table(StrEnum):
+    """The four Modbus data tables."""
+
+    HOLDING = "holding"
+    INPUT = "input"
+    COIL = "coil"
+    DISCRETE = "discrete"
+
+    @property
+    def is_bits(self) -> bool:
+        return self in (Table.COIL, Table.DISCRETE)
+
+    @property
+    def read_function(self) -> int:
+        return {"coil": 1, "discrete": 2, "holding": 3, "input": 4}[self.value]
+
+
+class DataType(StrEnum):
+    """Register types. 32-bit types span two registers; ``ascii`` spans ``count``."""
+
+    U16 = "u16"
+    S16 = "s16"
+    U32 = "u32"
+    S32 = "s32"
+    F32 = "f32"
+    ASCII = "ascii"
+    BOOL = "bool"
+
+
+class Access(StrEnum):
+    READ = "r"
+    READ_WRITE = "rw"
+    WRITE = "w"
+
+
+class PollClass(StrEnum):
+    FAST = "fast"
+    SLOW = "slow"
+    ONCE = "once"
+
+
+class Component(StrEnum):
+    """Home Assistant MQTT platforms the bridge publishes."""
+
+    SENSOR = "sensor"
+    BINARY_SENSOR = "binary_sensor"
+    NUMBER = "number"
+    SELECT = "select"
+    SWITCH = "switch"
+    BUTTON = "button"
+    TEXT = "text"
+
+
+class Confidence(StrEnum):
+    """How sure the device document is of a row; ``low`` rows stay disabled in Home Assistant."""
+
+    HIGH = "high"
+    MEDIUM = "medium"
+    LOW = "low"
+
+
+class Order(StrEnum):
+    BIG = "big"
+    LITTLE = "little"
+
+
+_STATE_CLASSES = ("measurement", "measurement_angle", "total", "total_increasing")
+_CATEGORIES = ("config", "diagnostic")
+_WIDTH = {DataType.U32: 2, DataType.S32: 2, DataType.F32: 2}
+
+
+class Presentation(BaseModel):
+    """Home Assistant presentation of one entity. Unset fields are derived (see Entity)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    component: Component | None = None
+    device_class: str | None = None
+    state_class: str | None = Field(None, pattern="^(" + "|".join(_STATE_CLASSES) + ")$")
+    entity_category: str | None = Field(None, pattern="^(" + "|".join(_CATEGORIES) + ")$")
+    icon: str | None = Field(None, pattern=r"^mdi:[a-z0-9-]+$")
+    enabled: bool | None = Field(None, description="enabled by default in Home Assistant")
+    display_precision: int | None = Field(None, ge=0, le=6)
+    mode: str | None = Field(None, pattern="^(auto|box|slider)$", description="number mode")
+
+
+class RawRange(BaseModel):
+    """Inclusive range of raw values, for ``on_when``."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    min: int | None = None
+    max: int | None = None
+
+
+class Variant(BaseModel):
+    """Field values that replace the entity's own for some device option values.
+
+    Used where a real device may differ from the manual's reading (Smartgen frequency at
+    0.1 Hz or 0.01 Hz): the key stays the same, the option picks the reading.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    when: dict[str, str | list[str]] = Field(min_length=1)
+    name: str | None = None
+    scale: float | None = None
+    offset: float | None = None
+    precision: int | None = None
+    unit: str | None = None
+    word_radix: int | None = None
+    confidence: Confidence | None = None
+    note: str | None = None
+    ha: Presentation | None = None
+
+    def overrides(self) -> dict[str, Any]:
+        return self.model_dump(exclude={"when"}, exclude_none=True)
+
+
+class Entity(BaseModel):
+    """One named value of a device. Addresses are written as printed in the manual."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str = Field(min_length=1, description="entity name without the device name")
+    address: PrintedAddress
+    table: Table = Table.HOLDING
+    type: DataType | None = Field(None, description="default: bool on bit tables, else u16")
+    count: int | None = Field(None, ge=1, le=125, description="registers of an ascii value")
+    word_order: Order = Order.BIG
+    byte_order: Order = Order.BIG
+    word_radix: int = Field(65536, ge=2, le=65536, description="u32 = high * radix + low")
+    bit: int | None = Field(None, ge=0, le=15, description="lowest bit of a bit/nibble field")
+    width: int | None = Field(None, ge=1, le=16, description="bits in the field (default 1)")
+    scale: float = 1.0
+    offset: float = 0.0
+    precision: int | None = Field(None, ge=0, le=6, description="decimals; default from scale")
+    unit: str | None = None
+    unit_from: str | None = Field(None, description="key of an enum entity whose label is unit")
+    sign_from: str | None = Field(None, description="key of a 1-bit entity: 1 = negative")
+    enum: dict[int, str] | None = None
+    sentinels: dict[int, str] = Field(
+        default_factory=dict, description="raw (unsigned) values meaning 'unknown', with reason"
+    )
+    on_when: RawRange | None = Field(None, description="boolean: raw value within this range")
+    min: float | None = None
+    max: float | None = None
+    min_from: str | None = Field(None, description="key of the entity holding the lower limit")
+    max_from: str | None = Field(None, description="key of the entity holding the upper limit")
+    step: float | None = Field(None, gt=0)
+    access: Access = Access.READ
+    write_address: PrintedAddress | None = None
+    write_function: int | None = Field(None, description="5, 6, 15 or 16; default by table")
+    press: bool | int | float | str | None = Field(None, description="value a button writes")
+    pulse: bool = Field(False, description="write the bit 1 then 0 (rising-edge commands)")
+    verify: bool = Field(True, description="read back after a write")
+    idempotent: bool = Field(True, description="false: never retried after a timeout (toggles)")
+    eeprom: bool = Field(False, description="non-volatile: skip unchanged writes, rate limit")
+    dangerous: bool = Field(False, description="write only when the config allows it")
+    secret: bool = Field(False, description="never published (passwords)")
+    alarm: bool = Field(False, description="an alarm: bool when on, enum when not normal")
+    normal: tuple[int, ...] = Field((0,), description="raw enum values that are not an alarm")
+    poll: PollClass | None = Field(None, description="default: once/slow/fast by kind")
+    confidence: Confidence = Confidence.HIGH
+    when: dict[str, str | list[str]] = Field(
+        default_factory=dict, description="present only for these device option values"
+    )
+    variants: tuple[Variant, ...] = Field((), description="first matching variant applies")
+    note: str | None = None
+    ha: Presentation = Presentation()
+
+    def with_variant(self, variant: Variant) -> Entity:
+        """This entity with a variant's fields applied (validated again)."""
+        data = self.model_dump(exclude_unset=True, exclude={"variants"})
+        return Entity.model_validate(data | variant.overrides())
+
+    # --- derived facts -------------------------------------------------------------
+
+    @property
+    def data_type(self) -> DataType:
+        if self.type is not None:
+            return self.type
+        return DataType.BOOL if self.table.is_bits else DataType.U16
+
+    @property
+    def register_count(self) -> int:
+        """Registers (or bits) the value spans on the wire."""
+        if self.data_type is DataType.ASCII:
+            return self.count or 1
+        return _WIDTH.get(self.data_type, 1)
+
+    @property
+    def field_width(self) -> int | None:
+        """Bits of a bit/nibble field, or None for a whole value."""
+        if self.bit is None:
+            return None
+        return self.width or 1
+
+    @property
+    def readable(self) -> bool:
+        return self.access is not Access.WRITE
+
+    @property
+    def writable(self) -> bool:
+        return self.access is not Access.READ
+
+    @property
+    def kind(self) -> str:
+        """What the decoded value is: ``bool``, ``enum``, ``text`` or ``number``."""
+        if self.enum is not None:
+            return "enum"
+        if self.data_type is DataType.ASCII:
+            return "text"
+        if self.data_type is DataType.BOOL or self.on_when is not None or self.field_width == 1:
+            return "bool"
+        return "number"
+
+    @property
+    def component(self) -> Component:
+        """The Home Assistant platform, from ``ha.component`` or derived from kind and access."""
+        if self.ha.component is not None:
+            return self.ha.component
+        if self.press is not None:
+            return Component.BUTTON
+        readonly = {"bool": Component.BINARY_SENSOR}
+        writable = {
+            "bool": Component.SWITCH,
+            "enum": Component.SELECT,
+            "text": Component.TEXT,
+            "number": Component.NUMBER,
+        }
+        table = writable if self.writable else readonly
+        return table.get(self.kind, Component.SENSOR)
+
+    @property
+    def poll_class(self) -> PollClass:
+        if self.poll is not None:
+            return self.poll
+        return PollClass.SLOW if self.writable else PollClass.FAST
+
+    @property
+    def enabled_by_default(self) -> bool:
+        if self.ha.enabled is not None:
+            return self.ha.enabled
+        return self.confidence is not Confidence.LOW and self.ha.entity_category != "diagnostic"
+
+    @property
+    def decimals(self) -> int:
+        """Decimals of the engineering value: ``precision`` or those of scale and offset."""
+        if self.precision is not None:
+            return self.precision
+        return max(_decimals_of(self.scale), _decimals_of(self.offset))
+
+    # --- checks that need only this entity -----------------------------------------
+
+    @model_validator(mode="after")
+    def _check_fields(self) -> Self:
+        problems = [check(self) for check in _FIELD_CHECKS]
+        errors = [p for p in problems if p]
+        if errors:
+            raise ValueError("; ".join(errors))
+        return self
+
+
+def _decimals_of(number: float) -> int:
+    text = repr(float(number))
+    if "e-" in text:
+        return int(text.split("e-")[1])
+    fraction = text.split(".")[1].rstrip("0") if "." in text else ""
+    return len(fraction)
+
+
+def _check_table_type(e: Entity) -> str | None:
+    if e.table.is_bits and e.data_type is not DataType.BOOL:
+        return f"a {e.table.value} entity has type bool, not {e.data_type.value}"
+    if not e.table.is_bits and e.data_type is DataType.BOOL:
+        return "type bool is for coil and discrete tables; use bit: N on a register"
+    if e.table is Table.DISCRETE and e.writable:
+        return "discrete inputs are read-only"
+    if e.table is Table.INPUT and e.writable:
+        return "input registers are read-only"
+    return None
+
+
+def _check_shape(e: Entity) -> str | None:
+    if (e.count is not None) != (e.data_type is DataType.ASCII):
+        return "count is given for ascii values, and only for them"
+    if e.bit is not None:
+        if e.data_type not in (DataType.U16, DataType.S16):
+            return "bit fields are taken from u16 registers"
+        if e.bit + (e.width or 1) > 16:
+            return f"bit {e.bit} + width {e.width} exceeds the 16-bit register"
+    elif e.width is not None:
+        return "width needs bit"
+    if e.word_radix != 65536 and e.data_type is not DataType.U32:
+        return "word_radix applies to u32 values only"
+    return None
+
+
+def _check_numeric(e: Entity) -> str | None:
+    scaled = e.scale != 1.0 or e.offset != 0.0
+    if e.scale == 0:
+        return "scale cannot be 0"
+    if scaled and e.kind != "number":
+        return f"scale/offset apply to numbers, not to {e.kind} values"
+    if e.min is not None and e.max is not None and e.min > e.max:
+        return f"min {e.min} is above max {e.max}"
+    if e.sign_from and e.data_type is not DataType.U16:
+        return "sign_from takes a magnitude from a u16 register"
+    if (e.unit or e.unit_from) and e.kind != "number":
+        return "unit applies to numbers"
+    if e.unit and e.unit_from:
+        return "give unit or unit_from, not both"
+    return None
+
+
+def _check_enum(e: Entity) -> str | None:
+    if e.enum is None:
+        return None
+    if e.data_type in (DataType.ASCII, DataType.F32):
+        return "enum needs an integer type"
+    labels = list(e.enum.values())
+    if len(set(labels)) != len(labels):
+        return "enum labels must be unique"
+    if any(not label.strip() for label in labels):
+        return "enum labels cannot be empty"
+    return None
+
+
+def _check_write(e: Entity) -> str | None:
+    if e.press is not None and e.access is not Access.WRITE:
+        return "press (a button) needs access: w"
+    if e.pulse and (e.access is not Access.WRITE or (e.field_width != 1 and not e.table.is_bits)):
+        return "pulse is for a write-only single bit or coil"
+    if e.write_function is not None and e.write_function not in (5, 6, 15, 16):
+        return "write_function is one of 5, 6, 15, 16"
+    if not e.writable and (e.write_address is not None or e.write_function is not None):
+        return "write_address/write_function need access rw or w"
+    if (e.dangerous or e.eeprom) and not e.writable:
+        return "dangerous/eeprom describe writes; the entity is read-only"
+    if e.on_when is not None and e.writable:
+        return "on_when derives a read-only boolean"
+    if e.access is Access.WRITE and e.alarm:
+        return "a write-only entity cannot be an alarm"
+    return None
+
+
+def _check_presentation(e: Entity) -> str | None:
+    if e.confidence is Confidence.LOW and e.ha.enabled:
+        return "a low-confidence entity stays disabled by default (ha.enabled: false)"
+    if e.alarm and e.kind not in ("bool", "enum"):
+        return "alarm entities are booleans or enums"
+    if e.ha.entity_category == "config" and not e.writable:
+        return "Home Assistant refuses entity_category config on read-only entities"
+    if e.ha.state_class and e.kind != "number":
+        return "state_class applies to numbers"
+    return None
+
+
+_FIELD_CHECKS = (
+    _check_table_type,
+    _check_shape,
+    _check_numeric,
+    _check_enum,
+    _check_write,
+    _check_presentation,
+)
+
+
+def describe(entity: Entity) -> dict[str, Any]:
+    """The entity's non-default fields, for ``mappings show``."""
+    return entity.model_dump(exclude_defaults=True, mode="json")

@@ -1,0 +1,195 @@
+"""A device mapping: one YAML file per device model, validated as a whole.
+
+``load_mapping(path)`` reads, validates and returns a ``Mapping``; every error names the
+file, the entity key and the field. ``Mapping.points(options)`` resolves the entities
+active for a device's option values into ``Point`` objects with wire addresses, which
+the codec and the planner work on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Self
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from bridge.core import checks
+from bridge.core.address import to_wire
+from bridge.core.entity import Entity, Table
+from bridge.core.protocol import OptionSpec, Protocol
+from bridge.core.yaml_source import parse_yaml
+from bridge.errors import MappingError
+
+
+class Source(BaseModel):
+    """The manual the mapping was written from."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    title: str
+    seed: str | None = None
+    document: str | None = None
+
+
+class Mapping(BaseModel):
+    """Everything the bridge knows about one device model."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    manufacturer: str
+    model: str
+    description: str
+    source: Source
+    protocol: Protocol = Protocol()
+    options: dict[str, OptionSpec] = Field(default_factory=dict)
+    status: str | None = Field(None, description="key of the entity that is the device status")
+    entities: dict[str, Entity] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _check_whole(self) -> Self:
+        errors = checks.check_mapping(self)
+        if errors:
+            raise ValueError("\n".join(errors))
+        return self
+
+    def default_options(self) -> dict[str, str]:
+        return {name: spec.default for name, spec in self.options.items()}
+
+    def active(self, options: dict[str, str] | None = None) -> dict[str, Entity]:
+        """Entities present for these option values (unset options take their default)."""
+        chosen = self.default_options() | (options or {})
+        return {
+            key: checks.apply_variants(entity, chosen)
+            for key, entity in self.entities.items()
+            if checks.when_matches(entity.when, chosen)
+        }
+
+    def points(self, options: dict[str, str] | None = None) -> dict[str, Point]:
+        """Resolve the active entities into points with wire addresses and linked sources."""
+        active = self.active(options)
+        rule = self.protocol.addressing
+        plain = {key: _plain_point(key, entity, self.protocol) for key, entity in active.items()}
+        resolved: dict[str, Point] = {}
+        for key, point in plain.items():
+            e = point.entity
+            resolved[key] = Point(
+                key=key,
+                entity=e,
+                address=point.address,
+                write_address=to_wire(e.write_address, rule)
+                if e.write_address is not None
+                else point.address,
+                write_function=point.write_function,
+                coil_on_value=self.protocol.coil_on_value,
+                sign=plain.get(e.sign_from or ""),
+                unit_source=plain.get(e.unit_from or ""),
+                min_source=plain.get(e.min_from or ""),
+                max_source=plain.get(e.max_from or ""),
+            )
+        return resolved
+
+
+@dataclass(frozen=True, slots=True)
+class Point:
+    """An entity resolved for one device: wire addresses and the points it depends on."""
+
+    key: str
+    entity: Entity
+    address: int
+    write_address: int
+    write_function: int | None
+    coil_on_value: int = 0xFF00
+    sign: Point | None = field(default=None, repr=False)
+    unit_source: Point | None = field(default=None, repr=False)
+    min_source: Point | None = field(default=None, repr=False)
+    max_source: Point | None = field(default=None, repr=False)
+
+    @property
+    def table(self) -> Table:
+        return self.entity.table
+
+    @property
+    def count(self) -> int:
+        return self.entity.register_count
+
+    @property
+    def span(self) -> range:
+        return range(self.address, self.address + self.count)
+
+
+def _plain_point(key: str, entity: Entity, protocol: Protocol) -> Point:
+    address = to_wire(entity.address, protocol.addressing)
+    return Point(
+        key=key,
+        entity=entity,
+        address=address,
+        write_address=address,
+        write_function=checks.write_function(entity, protocol) if entity.writable else None,
+        coil_on_value=protocol.coil_on_value,
+    )
+
+
+# --- loading ------------------------------------------------------------------------
+
+
+def parse_mapping(text: str, source: str) -> Mapping:
+    """Validate mapping YAML text; raise MappingError with ``entity.field: message`` rows."""
+    try:
+        data = parse_yaml(text, source)
+    except ValueError as exc:
+        raise MappingError(source, [str(exc)]) from None
+    if not isinstance(data, dict):
+        raise MappingError(source, ["the file must hold a mapping (key: value) at the top"])
+    try:
+        return Mapping.model_validate(data)
+    except ValidationError as exc:
+        raise MappingError(source, list(format_validation_errors(exc))) from None
+
+
+def load_mapping(path: Path) -> Mapping:
+    """Read and validate one mapping file."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MappingError(str(path), [f"cannot read: {exc.strerror}"]) from None
+    return parse_mapping(text, str(path))
+
+
+def builtin_mapping_names() -> list[str]:
+    """Names of the mappings shipped with the bridge (file stems in ``bridge.mappings``)."""
+    folder = resources.files("bridge.mappings")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def builtin_mapping_path(name: str) -> Path:
+    return Path(str(resources.files("bridge.mappings").joinpath(f"{name}.yaml")))
+
+
+def resolve_mapping_path(ref: str, base: Path | None = None) -> Path:
+    """A mapping reference is a shipped name (``nastec_vasco``) or a path to a YAML file."""
+    if ref in builtin_mapping_names():
+        return builtin_mapping_path(ref)
+    path = Path(ref)
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    if path.suffix in (".yaml", ".yml") and path.is_file():
+        return path
+    known = ", ".join(builtin_mapping_names())
+    raise MappingError(ref, [f"no shipped mapping of that name ({known}) and no such file"])
+
+
+def format_validation_errors(exc: ValidationError) -> Iterable[str]:
+    """Turn pydantic errors into ``entities.<key>.<field>: message`` rows."""
+    for error in exc.errors():
+        location = ".".join(str(part) for part in error["loc"])
+        message = error["msg"].removeprefix("Value error, ")
+        for line in message.splitlines():
+            yield f"{location}: {line}" if location else line
+
+
+def mapping_schema() -> dict[str, Any]:
+    """JSON Schema of the mapping format (for editor completion)."""
+    return Mapping.model_json_schema()

@@ -1,0 +1,1 @@
+"""EDGE: the only package that imports pymodbus and pyserial."""
