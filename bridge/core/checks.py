@@ -12,6 +12,8 @@ from collections.abc import Iterator
 from collections.abc import Mapping as AnyMapping
 from typing import TYPE_CHECKING
 
+from pydantic import ValidationError
+
 from bridge.core.address import to_wire
 from bridge.core.entity import Access, DataType, Entity, Table
 from bridge.core.protocol import Protocol
@@ -103,8 +105,10 @@ def _options(mapping: Mapping) -> Iterator[str]:
             yield from _when_problems(mapping, f"entities.{key}.variants.{index}", variant.when)
             try:
                 e.with_variant(variant)
-            except ValueError as exc:  # pydantic's ValidationError is a ValueError
-                yield f"entities.{key}.variants.{index}: {exc}"
+            except ValidationError as exc:
+                for error in exc.errors():
+                    message = error["msg"].removeprefix("Value error, ")
+                    yield f"entities.{key}.variants.{index}: {message}"
         yield from _when_problems(mapping, f"entities.{key}", e.when)
 
 

@@ -108,12 +108,24 @@ def decode(point: Point, image: Image) -> Value:
     if unsigned in entity.sentinels:
         return None
     if kind is DataType.F32:
-        number = struct.unpack(">f", unsigned.to_bytes(4, "big"))[0]
-        return None if math.isnan(number) else round(number, 6)
+        return _shortest_f32(unsigned)
     raw = _integer(entity, unsigned)
     if entity.kind == "number" and point.sign is not None and decode(point.sign, image):
         raw = -raw
     return _finish(entity, raw)
+
+
+def _shortest_f32(bits: int) -> float | None:
+    """The float32 as the shortest decimal that maps back to it (3.14, not 3.1400001)."""
+    packed = bits.to_bytes(4, "big")
+    number: float = struct.unpack(">f", packed)[0]
+    if not math.isfinite(number):
+        return None
+    for digits in range(6, 10):
+        candidate = float(f"{number:.{digits}g}")
+        if struct.pack(">f", candidate) == packed:
+            return candidate
+    return number
 
 
 def _integer(entity: Entity, unsigned: int) -> int:

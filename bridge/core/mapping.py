@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Self
 
@@ -158,14 +157,20 @@ def load_mapping(path: Path) -> Mapping:
     return parse_mapping(text, str(path))
 
 
+def mappings_folder() -> Path:
+    """The shipped mappings: ``bridge/mappings`` in a wheel, ``mappings/`` in a checkout."""
+    package = Path(__file__).resolve().parent.parent
+    installed = package / "mappings"
+    return installed if installed.is_dir() else package.parent / "mappings"
+
+
 def builtin_mapping_names() -> list[str]:
-    """Names of the mappings shipped with the bridge (file stems in ``bridge.mappings``)."""
-    folder = resources.files("bridge.mappings")
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+    """Names of the mappings shipped with the bridge (file stems)."""
+    return sorted(path.stem for path in mappings_folder().glob("*.yaml"))
 
 
 def builtin_mapping_path(name: str) -> Path:
-    return Path(str(resources.files("bridge.mappings").joinpath(f"{name}.yaml")))
+    return mappings_folder() / f"{name}.yaml"
 
 
 def resolve_mapping_path(ref: str, base: Path | None = None) -> Path:

@@ -1,0 +1,177 @@
+"""Command line: ``modbus-mqtt-bridge check | schema | mappings list|show|validate``.
+
+Exit codes: 0 success, 2 invalid input (the message names file, entity or path, field).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TextIO
+
+from bridge import __version__
+from bridge.config import config_schema, load_config
+from bridge.core.address import format_address
+from bridge.core.entity import Entity
+from bridge.core.mapping import (
+    Mapping,
+    builtin_mapping_names,
+    load_mapping,
+    mapping_schema,
+    resolve_mapping_path,
+)
+from bridge.errors import InputError
+
+EXIT_OK = 0
+EXIT_INVALID = 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args, sys.stdout))
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="modbus-mqtt-bridge",
+        description="Modbus RTU/TCP devices to MQTT and Home Assistant.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    check = commands.add_parser("check", help="validate a config file and its mappings")
+    check.add_argument("-c", "--config", type=Path, required=True, metavar="FILE")
+    check.set_defaults(handler=_check)
+
+    schema = commands.add_parser("schema", help="print the JSON Schema of config and mapping")
+    schema.add_argument("which", nargs="?", choices=("all", "config", "mapping"), default="all")
+    schema.set_defaults(handler=_schema)
+
+    mappings = commands.add_parser("mappings", help="list, show or validate mappings")
+    actions = mappings.add_subparsers(dest="action", required=True, metavar="ACTION")
+    actions.add_parser("list", help="the shipped mappings").set_defaults(handler=_list)
+    show = actions.add_parser("show", help="entities of a mapping with wire addresses")
+    show.add_argument("name", help="shipped mapping name or path to a YAML file")
+    show.add_argument(
+        "-o",
+        "--option",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="select a model option (repeatable)",
+    )
+    show.set_defaults(handler=_show)
+    validate = actions.add_parser("validate", help="validate mapping files")
+    validate.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    validate.set_defaults(handler=_validate)
+    return parser
+
+
+def _check(args: argparse.Namespace, out: TextIO) -> int:
+    loaded = load_config(args.config)
+    config = loaded.config
+    entities = sum(
+        len(loaded.mappings[d.id].active(d.options)) for d in config.devices if d.enabled
+    )
+    print(
+        f"{args.config}: ok ({len(config.buses)} bus(es), {len(config.devices)} device(s), "
+        f"{entities} entities)",
+        file=out,
+    )
+    return EXIT_OK
+
+
+def _schema(args: argparse.Namespace, out: TextIO) -> int:
+    schemas = {"config": config_schema(), "mapping": mapping_schema()}
+    document = schemas if args.which == "all" else schemas[args.which]
+    json.dump(document, out, indent=2)
+    out.write("\n")
+    return EXIT_OK
+
+
+def _list(_: argparse.Namespace, out: TextIO) -> int:
+    rows = []
+    for name in builtin_mapping_names():
+        mapping = load_mapping(resolve_mapping_path(name))
+        rows.append((name, mapping.manufacturer, mapping.model, str(len(mapping.entities))))
+    _table(("NAME", "MANUFACTURER", "MODEL", "ENTITIES"), rows, out)
+    return EXIT_OK
+
+
+def _show(args: argparse.Namespace, out: TextIO) -> int:
+    mapping = load_mapping(resolve_mapping_path(args.name, Path.cwd()))
+    options = _parse_options(args.option, mapping)
+    print(f"{mapping.manufacturer} {mapping.model}: {mapping.description}", file=out)
+    for name, spec in mapping.options.items():
+        chosen = options.get(name, spec.default)
+        print(
+            f"option {name} = {chosen}  ({', '.join(spec.choices)}): {spec.description}", file=out
+        )
+    rows = []
+    rule = mapping.protocol.addressing
+    for key, point in mapping.points(options).items():
+        e = point.entity
+        unit = e.unit or (f"<{e.unit_from}>" if e.unit_from else "")
+        wire = f"{point.address} (0x{point.address:04X})"
+        address = format_address(e.address, rule)
+        rows.append((key, address, wire, e.table.value, e.data_type.value, _bits(e)))
+        rows[-1] += (e.access.value, unit, e.component.value)
+    headers = ("KEY", "PRINTED", "WIRE", "TABLE", "TYPE", "BITS", "ACCESS", "UNIT", "HA")
+    _table(headers, rows, out)
+    return EXIT_OK
+
+
+def _bits(entity: Entity) -> str:
+    if entity.bit is None:
+        return ""
+    last = entity.bit + (entity.field_width or 1) - 1
+    return str(entity.bit) if last == entity.bit else f"{entity.bit}-{last}"
+
+
+def _parse_options(pairs: list[str], mapping: Mapping) -> dict[str, str]:
+    options: dict[str, str] = {}
+    problems = []
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        spec = mapping.options.get(name)
+        if spec is None or value not in spec.choices:
+            known = {n: list(s.choices) for n, s in mapping.options.items()}
+            problems.append(f"--option {pair}: choose from {known}")
+        options[name] = value
+    if problems:
+        raise InputError("options", problems)
+    return options
+
+
+def _validate(args: argparse.Namespace, out: TextIO) -> int:
+    failed = 0
+    for path in args.files:
+        try:
+            mapping = load_mapping(path)
+        except InputError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        print(f"{path}: ok ({len(mapping.entities)} entities)", file=out)
+    return EXIT_INVALID if failed else EXIT_OK
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], out: TextIO) -> None:
+    widths = [max(len(str(c)) for c in column) for column in zip(headers, *rows, strict=False)]
+    for row in (headers, *rows):
+        print(
+            "  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)).rstrip(), file=out
+        )
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

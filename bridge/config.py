@@ -1,0 +1,307 @@
+"""The config file: MQTT connection, buses, devices. ``load_config`` validates it whole.
+
+Errors are reported as ``path: message`` rows (``devices.borehole_pump.unit: ...``), all
+at once, and nothing is started on a bad file. Secrets (the MQTT password) come from the
+file, a file named by ``password_file`` or an environment variable named by
+``password_env``; they are ``SecretStr`` so that dumps and logs show ``**********``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal, Self
+from urllib.parse import urlsplit
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SecretStr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from bridge.core.duration import Duration
+from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
+from bridge.core.mapping import resolve_mapping_path as _resolve
+from bridge.core.yaml_source import parse_yaml
+from bridge.errors import ConfigError, MappingError
+
+_ID = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
+_TOPIC_FORBIDDEN = re.compile(r"[#+\x00]")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class TlsConfig(_Strict):
+    """TLS for mqtts://: CA bundle, optional client certificate, or no verification."""
+
+    ca: Path | None = None
+    cert: Path | None = None
+    key: Path | None = None
+    insecure: bool = Field(False, description="skip certificate verification (testing only)")
+
+
+class MqttConfig(_Strict):
+    url: str = "mqtt://127.0.0.1:1883"
+    base_topic: str = "modbus"
+    discovery_prefix: str = "homeassistant"
+    discovery: Literal["device", "entity", "off"] = Field(
+        "device", description="device-based discovery, per-entity (older HA), or none"
+    )
+    client_id: str | None = None
+    username: str | None = None
+    password: SecretStr | None = None
+    password_file: Path | None = None
+    password_env: str | None = None
+    tls: TlsConfig | None = None
+    version: Literal["5", "3.1.1"] = Field("5", description="MQTT 5, falls back to 3.1.1")
+    keepalive: Duration = 60.0
+    qos: Literal[0, 1, 2] = 1
+    state_refresh: Duration = Field(300.0, description="republish every value this often")
+    command_expiry: Duration = Field(5.0, description="drop commands not executed in time")
+
+    @field_validator("url")
+    @classmethod
+    def _check_url(cls, url: str) -> str:
+        parts = urlsplit(url)
+        if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
+            raise ValueError("use mqtt://host[:port] or mqtts://host[:port]")
+        return url
+
+    @field_validator("base_topic", "discovery_prefix")
+    @classmethod
+    def _check_topic(cls, topic: str) -> str:
+        if not topic or topic.startswith("/") or topic.endswith("/"):
+            raise ValueError("a topic prefix is non-empty and has no leading or trailing '/'")
+        if _TOPIC_FORBIDDEN.search(topic):
+            raise ValueError("a topic prefix cannot contain '#', '+' or NUL")
+        return topic
+
+    @model_validator(mode="after")
+    def _one_password_source(self) -> Self:
+        given = [self.password, self.password_file, self.password_env]
+        if sum(value is not None for value in given) > 1:
+            raise ValueError("give one of password, password_file, password_env")
+        return self
+
+    @property
+    def host(self) -> str:
+        return urlsplit(self.url).hostname or "127.0.0.1"
+
+    @property
+    def port(self) -> int:
+        parts = urlsplit(self.url)
+        return parts.port or (8883 if parts.scheme == "mqtts" else 1883)
+
+    def password_value(self) -> str | None:
+        """The password from whichever source is configured (read now, never logged)."""
+        if self.password is not None:
+            return self.password.get_secret_value()
+        if self.password_file is not None:
+            return self.password_file.read_text(encoding="utf-8").strip()
+        if self.password_env is not None:
+            return os.environ.get(self.password_env)
+        return None
+
+
+class _BusBase(_Strict):
+    id: str
+    timeout: Duration = Field(1.0, description="seconds to wait for a reply")
+    retries: int = Field(1, ge=0, le=5, description="resends after a timeout")
+
+    @field_validator("id")
+    @classmethod
+    def _check_id(cls, value: str) -> str:
+        return _check_identifier(value)
+
+
+class SerialBus(_BusBase):
+    transport: Literal["rtu", "ascii"]
+    port: str = Field(description="serial device, e.g. /dev/ttyUSB0")
+    baudrate: int = Field(9600, ge=300, le=921600)
+    parity: Literal["N", "E", "O"] = "N"
+    stopbits: Literal[1, 2] = 1
+    bytesize: Literal[7, 8] = 8
+
+
+class TcpBus(_BusBase):
+    transport: Literal["tcp", "rtu-over-tcp"]
+    host: str
+    tcp_port: int = Field(502, ge=1, le=65535)
+
+
+Bus = Annotated[SerialBus | TcpBus, Field(discriminator="transport")]
+
+
+class PollConfig(_Strict):
+    fast: Duration = 2.0
+    slow: Duration = 60.0
+
+
+class ProtocolOverride(_Strict):
+    """Per-device overrides of the mapping's protocol numbers (what a real unit allows)."""
+
+    max_read_registers: int | None = Field(None, ge=1, le=125)
+    max_read_bits: int | None = Field(None, ge=1, le=2000)
+    coil_on_value: int | None = Field(None, ge=0, le=0xFFFF)
+    min_request_interval: Duration | None = None
+    response_timeout: Duration | None = None
+
+
+class DeviceConfig(_Strict):
+    id: str
+    name: str | None = None
+    bus: str
+    unit: int = Field(ge=1, le=255, description="Modbus unit id (1..247 on serial lines)")
+    mapping: str = Field(description="shipped mapping name or path to a mapping YAML file")
+    poll: PollConfig = PollConfig()
+    options: dict[str, str] = Field(default_factory=dict)
+    protocol: ProtocolOverride = ProtocolOverride()
+    allow_dangerous_writes: bool = Field(False, description="permit writes marked dangerous")
+    enabled: bool = True
+
+    @field_validator("id")
+    @classmethod
+    def _check_id(cls, value: str) -> str:
+        return _check_identifier(value)
+
+    @property
+    def display_name(self) -> str:
+        return self.name or self.id.replace("_", " ").capitalize()
+
+
+class Config(_Strict):
+    mqtt: MqttConfig = MqttConfig()
+    buses: list[Bus] = Field(min_length=1)
+    devices: list[DeviceConfig] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _check_references(self) -> Self:
+        errors: list[str] = []
+        errors += _duplicates("buses", [bus.id for bus in self.buses])
+        errors += _duplicates("devices", [device.id for device in self.devices])
+        buses = {bus.id: bus for bus in self.buses}
+        units: dict[tuple[str, int], str] = {}
+        for device in self.devices:
+            where = f"devices.{device.id}"
+            bus = buses.get(device.bus)
+            if bus is None:
+                errors.append(f"{where}.bus: no bus {device.bus!r} (have {sorted(buses)})")
+                continue
+            if isinstance(bus, SerialBus) and device.unit > 247:
+                errors.append(f"{where}.unit: serial lines address units 1..247")
+            if not device.enabled:
+                continue
+            other = units.setdefault((device.bus, device.unit), device.id)
+            if other != device.id:
+                errors.append(f"{where}.unit: unit {device.unit} is also {other!r} on {bus.id}")
+        if errors:
+            raise ValueError("\n".join(errors))
+        return self
+
+
+def _check_identifier(value: str) -> str:
+    if not _ID.match(value):
+        raise ValueError("ids are lowercase letters, digits, '_' and '-' (used in MQTT topics)")
+    return value
+
+
+def _duplicates(section: str, ids: list[str]) -> list[str]:
+    counts = Counter(ids)
+    return [f"{section}.{i}: id used {n} times" for i, n in counts.items() if n > 1]
+
+
+@dataclass(frozen=True, slots=True)
+class LoadedConfig:
+    """A validated config with each device's mapping loaded and its options checked."""
+
+    path: Path
+    config: Config
+    mappings: dict[str, Mapping]
+
+
+def load_config(path: Path) -> LoadedConfig:
+    """Read and validate a config file and every mapping it names; ConfigError on problems."""
+    try:
+        text = path.read_text(encoding="utf-8")
+        data = parse_yaml(text, str(path))
+    except OSError as exc:
+        raise ConfigError(str(path), [f"cannot read: {exc.strerror}"]) from None
+    except ValueError as exc:
+        raise ConfigError(str(path), [str(exc)]) from None
+    if not isinstance(data, dict):
+        raise ConfigError(str(path), ["the file must hold a mapping with mqtt, buses, devices"])
+    try:
+        config = Config.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(str(path), _with_ids(format_validation_errors(exc), data)) from None
+    mappings, errors = _load_mappings(config, path.parent)
+    errors += _secret_errors(config.mqtt)
+    if errors:
+        raise ConfigError(str(path), errors)
+    return LoadedConfig(path=path, config=config, mappings=mappings)
+
+
+def _load_mappings(config: Config, base: Path) -> tuple[dict[str, Mapping], list[str]]:
+    loaded: dict[str, Mapping] = {}
+    cache: dict[Path, Mapping] = {}
+    errors: list[str] = []
+    buses = {bus.id: bus for bus in config.buses}
+    for device in config.devices:
+        where = f"devices.{device.id}"
+        try:
+            path = _resolve(device.mapping, base)
+            mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
+        except MappingError as exc:
+            errors.extend(f"{where}.mapping: {exc.source}: {issue}" for issue in exc.issues)
+            continue
+        loaded[device.id] = mapping
+        for name, value in device.options.items():
+            spec = mapping.options.get(name)
+            if spec is None:
+                known = ", ".join(mapping.options) or "none"
+                errors.append(f"{where}.options.{name}: the mapping has no such option ({known})")
+            elif value not in spec.choices:
+                errors.append(f"{where}.options.{name}: {value!r} is not one of {spec.choices}")
+        transport = buses[device.bus].transport
+        if transport == "ascii" and "ascii" not in mapping.protocol.transports:
+            errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
+    return loaded, errors
+
+
+def _secret_errors(mqtt: MqttConfig) -> list[str]:
+    if mqtt.password_file is not None and not mqtt.password_file.is_file():
+        return [f"mqtt.password_file: no such file {str(mqtt.password_file)!r}"]
+    if mqtt.password_env is not None and mqtt.password_env not in os.environ:
+        return [f"mqtt.password_env: environment variable {mqtt.password_env} is not set"]
+    return []
+
+
+def _with_ids(rows: Iterable[str], data: dict[str, Any]) -> list[str]:
+    """Replace list indexes by ids: ``devices.0.unit`` -> ``devices.borehole_pump.unit``."""
+    result = []
+    for row in rows:
+        location, sep, message = row.partition(": ")
+        parts = location.split(".")
+        items = data.get(parts[0])
+        if len(parts) > 1 and parts[1].isdigit() and isinstance(items, list):
+            index = int(parts[1])
+            item = items[index] if index < len(items) else None
+            if isinstance(item, dict) and isinstance(item.get("id"), str) and item["id"]:
+                parts[1] = item["id"]
+        result.append(".".join(parts) + sep + message)
+    return result
+
+
+def config_schema() -> dict[str, Any]:
+    """JSON Schema of the config file (for editor completion)."""
+    return Config.model_json_schema()

@@ -1,0 +1,90 @@
+"""The console script: check, schema, mappings list/show/validate, exit codes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bridge.cli import main
+from bridge.core.mapping import builtin_mapping_names
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "examples" / "config.yaml"
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "bridge.cli", *args],
+        capture_output=True, text=True, timeout=60, check=False, cwd=ROOT,
+    )
+
+
+def test_check_example_config_exits_0() -> None:
+    result = run("check", "-c", str(EXAMPLE))
+    assert result.returncode == 0, result.stderr
+    assert "ok (2 bus(es), 5 device(s)" in result.stdout
+
+
+def test_check_bad_config_exits_2_naming_the_field(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(EXAMPLE.read_text().replace("unit: 3", "unit: 0"))
+    result = run("check", "-c", str(bad))
+    assert result.returncode == 2
+    assert f"{bad}: 1 error(s)" in result.stderr
+    assert "devices.fan_drive.unit: Input should be greater than or equal to 1" in result.stderr
+    assert result.stdout == ""
+
+
+def test_schema_prints_both_json_schemas(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["schema"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert set(document) == {"config", "mapping"}
+    assert "devices" in document["config"]["properties"]
+    assert "entities" in document["mapping"]["properties"]
+    assert main(["schema", "mapping"]) == 0
+    assert json.loads(capsys.readouterr().out)["title"] == "Mapping"
+
+
+def test_mappings_list_names_all_shipped(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["mappings", "list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100"):
+        assert name in out
+    assert len(out.splitlines()) == 1 + len(builtin_mapping_names())
+
+
+def test_mappings_show_prints_printed_and_wire_address(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["mappings", "show", "nastec_vasco"]) == 0
+    line = next(row for row in capsys.readouterr().out.splitlines() if row.startswith("actual_value "))
+    assert "0x0098" in line
+    assert "151 (0x0097)" in line
+
+
+def test_mappings_show_option_and_bad_option(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["mappings", "show", "smartgen_hgm6100", "-o", "model=hgm6110"]) == 0
+    assert "option model = hgm6110" in capsys.readouterr().out
+    assert main(["mappings", "show", "smartgen_hgm6100", "-o", "model=hgm9999"]) == 2
+    assert "--option model=hgm9999: choose from" in capsys.readouterr().err
+
+
+def test_mappings_validate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good = ROOT / "mappings" / "soft_starter.yaml"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(good.read_text().replace("manufacturer:", "manufactuer:", 1))
+    assert main(["mappings", "validate", str(good)]) == 0
+    assert "soft_starter.yaml: ok" in capsys.readouterr().out
+    assert main(["mappings", "validate", str(good), str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "manufacturer: Field required" in err
+    assert "manufactuer: Extra inputs are not permitted" in err
+
+
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as caught:
+        main(["--version"])
+    assert caught.value.code == 0
+    assert capsys.readouterr().out.startswith("modbus-mqtt-bridge ")

@@ -1,0 +1,183 @@
+"""Config model: every section, secrets, cross-references, and errors as ``path: message``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bridge.config import SerialBus, TcpBus, load_config
+from bridge.errors import ConfigError
+
+MAPPING = """
+manufacturer: Test
+model: T1
+description: test device
+source: {title: test manual}
+options:
+  model: {description: m, choices: [a, b], default: a}
+entities:
+  speed: {name: Speed, address: 1}
+"""
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    (tmp_path / "t1.yaml").write_text(MAPPING)
+    path = tmp_path / "config.yaml"
+    path.write_text(text)
+    return path
+
+
+GOOD = """
+mqtt:
+  url: mqtts://broker.example:8883
+  base_topic: site/modbus
+  username: bridge
+  password_file: {secret}
+  tls: {ca: /etc/ssl/ca.pem}
+buses:
+  - {id: rs485, transport: rtu, port: /dev/ttyUSB0, baudrate: 19200, parity: E, stopbits: 1}
+  - {id: line2, transport: ascii, port: /dev/ttyUSB1, bytesize: 7}
+  - {id: gw, transport: rtu-over-tcp, host: 192.0.2.1, tcp_port: 4001, timeout: 500ms}
+devices:
+  - {id: pump, name: Pump, bus: rs485, unit: 1, mapping: t1.yaml, options: {model: b},
+     poll: {fast: 1s, slow: 5m}, protocol: {max_read_registers: 4}}
+  - {id: drive, bus: gw, unit: 2, mapping: p2_vfd}
+"""
+
+
+def test_good_config(tmp_path: Path) -> None:
+    secret = tmp_path / "secret"
+    secret.write_text("s3cret\n")
+    loaded = load_config(write(tmp_path, GOOD.replace("{secret}", str(secret))))
+    config = loaded.config
+    assert config.mqtt.host == "broker.example"
+    assert config.mqtt.port == 8883
+    assert config.mqtt.password_value() == "s3cret"
+    assert isinstance(config.buses[0], SerialBus)
+    assert config.buses[0].parity == "E"
+    assert isinstance(config.buses[2], TcpBus)
+    assert config.buses[2].timeout == 0.5
+    assert config.devices[0].poll.slow == 300.0
+    assert config.devices[0].protocol.max_read_registers == 4
+    assert config.devices[1].display_name == "Drive"
+    assert loaded.mappings["pump"].model == "T1"
+    assert loaded.mappings["drive"].manufacturer
+
+
+def test_defaults() -> None:
+    from bridge.config import Config
+
+    config = Config.model_validate({"buses": [{"id": "b", "transport": "tcp", "host": "h"}]})
+    assert config.mqtt.url == "mqtt://127.0.0.1:1883"
+    assert config.mqtt.port == 1883
+    assert config.mqtt.base_topic == "modbus"
+    assert config.mqtt.discovery == "device"
+    assert config.buses[0].tcp_port == 502
+
+
+def test_secrets_never_show_in_dumps(tmp_path: Path) -> None:
+    text = GOOD.replace("password_file: {secret}", "password: hunter2")
+    config = load_config(write(tmp_path, text)).config
+    assert "hunter2" not in config.model_dump_json()
+    assert "hunter2" not in repr(config)
+    assert config.mqtt.password_value() == "hunter2"
+
+
+def test_password_from_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    text = GOOD.replace("password_file: {secret}", "password_env: BRIDGE_TEST_PW")
+    with pytest.raises(ConfigError, match="BRIDGE_TEST_PW is not set"):
+        load_config(write(tmp_path, text))
+    monkeypatch.setenv("BRIDGE_TEST_PW", "from-env")
+    assert load_config(write(tmp_path, text)).config.mqtt.password_value() == "from-env"
+
+
+def issues(tmp_path: Path, text: str) -> tuple[str, ...]:
+    with pytest.raises(ConfigError) as caught:
+        load_config(write(tmp_path, text))
+    assert caught.value.source.endswith("config.yaml")
+    return caught.value.issues
+
+
+BASE = """
+buses:
+  - {id: rs485, transport: rtu, port: /dev/ttyUSB0}
+devices:
+  - {id: pump, bus: rs485, unit: 1, mapping: t1.yaml}
+"""
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        (("unit: 1", "unit: 300"), "devices.pump.unit: Input should be less than or equal to 255"),
+        (("unit: 1", "unit: 250"), "devices.pump.unit: serial lines address units 1..247"),
+        (("bus: rs485", "bus: nowhere"), "devices.pump.bus: no bus 'nowhere' (have ['rs485'])"),
+        (("id: pump", "id: Pump!"), "devices.Pump!.id: ids are lowercase"),
+        (("transport: rtu", "transport: can"), "buses.rs485: Input tag 'can' found"),
+        (("mapping: t1.yaml", "mapping: nope"), "devices.pump.mapping: nope: no shipped mapping"),
+        (("mapping: t1.yaml", "mapping: t1.yaml, options: {model: z}"),
+         "devices.pump.options.model: 'z' is not one of ('a', 'b')"),
+        (("mapping: t1.yaml", "mapping: t1.yaml, options: {colour: red}"),
+         "devices.pump.options.colour: the mapping has no such option (model)"),
+        (("mapping: t1.yaml", "mapping: t1.yaml, poll: {fast: soon}"),
+         "devices.pump.poll.fast: invalid duration 'soon'"),
+        (("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, parity: X"), "buses.rs485.rtu.parity"),
+    ],
+)
+def test_errors_name_the_path(tmp_path: Path, change: tuple[str, str], expected: str) -> None:
+    rows = issues(tmp_path, BASE.replace(*change))
+    assert any(row.startswith(expected) for row in rows), rows
+
+
+def test_duplicates_are_reported(tmp_path: Path) -> None:
+    text = BASE + "  - {id: pump, bus: rs485, unit: 1, mapping: t1.yaml}\n"
+    rows = issues(tmp_path, text)
+    assert "devices.pump: id used 2 times" in rows
+    assert "devices.pump.unit: unit 1 is also 'pump' on rs485" not in rows
+
+
+def test_two_devices_on_one_unit(tmp_path: Path) -> None:
+    text = BASE + "  - {id: pump2, bus: rs485, unit: 1, mapping: t1.yaml}\n"
+    assert issues(tmp_path, text) == ("devices.pump2.unit: unit 1 is also 'pump' on rs485",)
+
+
+def test_disabled_device_may_share_a_unit(tmp_path: Path) -> None:
+    text = BASE + "  - {id: old, bus: rs485, unit: 1, mapping: t1.yaml, enabled: false}\n"
+    assert load_config(write(tmp_path, text)).config.devices[1].enabled is False
+
+
+@pytest.mark.parametrize(
+    ("mqtt", "expected"),
+    [
+        ("{url: http://x}", "mqtt.url: use mqtt://host[:port]"),
+        ("{base_topic: /modbus}", "mqtt.base_topic: a topic prefix is non-empty"),
+        ("{base_topic: 'a/#'}", "mqtt.base_topic: a topic prefix cannot contain"),
+        ("{password: a, password_env: B}", "mqtt: give one of password"),
+        ("{password_file: /nonexistent/pw}", "mqtt.password_file: no such file"),
+        ("{qos: 3}", "mqtt.qos: Input should be 0, 1 or 2"),
+    ],
+)
+def test_mqtt_errors(tmp_path: Path, mqtt: str, expected: str) -> None:
+    rows = issues(tmp_path, f"mqtt: {mqtt}\n" + BASE)
+    assert any(row.startswith(expected) for row in rows), rows
+
+
+def test_ascii_bus_needs_an_ascii_device(tmp_path: Path) -> None:
+    text = BASE.replace("transport: rtu", "transport: ascii")
+    assert issues(tmp_path, text) == ("devices.pump.bus: T1 does not speak Modbus ASCII",)
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("- a\n- b\n", "must hold a mapping"),
+    ("buses: [\n", "invalid YAML"),
+    ("mqtt: {}\n", "buses: Field required"),
+])
+def test_not_a_config(tmp_path: Path, text: str, message: str) -> None:
+    rows = issues(tmp_path, text)
+    assert any(message in row for row in rows), rows
+
+
+def test_unreadable_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "missing.yaml")

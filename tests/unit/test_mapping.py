@@ -1,0 +1,461 @@
+"""The mapping format: every item DESIGN.md lists, and errors that name file, entity and field."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pydantic import ValidationError
+
+from bridge.core.entity import Component, PollClass, Table
+from bridge.core.mapping import format_validation_errors, load_mapping, parse_mapping
+from bridge.errors import MappingError
+from tests.factory import make_mapping
+
+HEADER = """
+manufacturer: Test
+model: T1
+description: test device
+source: {title: test manual}
+"""
+
+
+def errors_of(entities: dict[str, dict[str, Any]], **top: Any) -> list[str]:
+    """The ``location: message`` rows a user would see for this mapping."""
+    with pytest.raises(ValidationError) as caught:
+        make_mapping(entities, **top)
+    return list(format_validation_errors(caught.value))
+
+
+# --- addresses ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("addressing", "printed", "wire"),
+    [
+        ({"offset": -1}, 0x98, 0x97),  # Nastec index N is sent as N-1
+        ({"offset": -1}, 2001, 2000),  # Vacon ID 2001 = 42001 = wire 2000
+        ({"groups": {"F": 0xF0}}, "F3.01", 0xF301),  # P2 Fx.yy = 0xFxyy
+        ({"groups": {"F": 0xF0}}, "F0.10", 0xF00A),  # index in binary
+        ({"groups": {"y": 0xC0}}, "y0.01", 0xC001),
+        ({}, "1F00H", 0x1F00),
+        ({}, "0x1036", 0x1036),
+        ({}, "24", 24),
+    ],
+)
+def test_printed_address_to_wire(addressing: dict, printed: object, wire: int) -> None:
+    mapping = make_mapping(
+        {"v": {"name": "V", "address": printed}}, protocol={"addressing": addressing}
+    )
+    assert mapping.points()["v"].address == wire
+
+
+@pytest.mark.parametrize(
+    ("printed", "message"),
+    [
+        ("Q1.01", "parameter group 'Q'"),
+        ("banana", "is not a number"),
+        (0, "outside 0..65535"),
+        ("F0.300", "does not fit"),
+    ],
+)
+def test_bad_addresses_are_named(printed: object, message: str) -> None:
+    rows = errors_of(
+        {"speed": {"name": "Speed", "address": printed}},
+        protocol={"addressing": {"offset": -1, "groups": {"F": 0xF0}}},
+    )
+    assert any(r.startswith("entities.speed.address:") and message in r for r in rows), rows
+
+
+def test_tables_and_function_codes() -> None:
+    mapping = make_mapping(
+        {
+            "h": {"name": "H", "address": 1},
+            "i": {"name": "I", "address": 1, "table": "input"},
+            "c": {"name": "C", "address": 1, "table": "coil"},
+            "d": {"name": "D", "address": 1, "table": "discrete"},
+        }
+    )
+    assert [p.table.read_function for p in mapping.points().values()] == [3, 4, 1, 2]
+    rows = errors_of(
+        {"c": {"name": "C", "address": 1, "table": "coil"}}, protocol={"function_codes": [3, 6]}
+    )
+    assert rows == [
+        "entities.c.table: reading coil needs function 1, which the device does not support"
+    ]
+
+
+def test_write_function_follows_table_width_and_device() -> None:
+    mapping = make_mapping(
+        {
+            "single": {"name": "S", "address": 1, "access": "rw"},
+            "double": {"name": "D", "address": 2, "type": "u32", "access": "rw"},
+            "coil": {"name": "C", "address": 1, "table": "coil", "access": "rw"},
+        }
+    )
+    points = mapping.points()
+    assert [points[k].write_function for k in ("single", "double", "coil")] == [6, 16, 5]
+    rows = errors_of(
+        {"double": {"name": "D", "address": 2, "type": "u32", "access": "rw"}},
+        protocol={"function_codes": [3, 6]},
+    )
+    assert rows == ["entities.double.access: a write needs function 16, not supported"]
+
+
+def test_fc16_only_device_writes_single_registers_with_16() -> None:
+    mapping = make_mapping(
+        {"s": {"name": "S", "address": 1, "access": "rw"}}, protocol={"function_codes": [3, 16]}
+    )
+    assert mapping.points()["s"].write_function == 16
+
+
+# --- types and fields ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"table": "coil", "type": "u16"}, "has type bool"),
+        ({"type": "bool"}, "type bool is for coil and discrete"),
+        ({"table": "input", "access": "rw"}, "input registers are read-only"),
+        ({"table": "discrete", "access": "rw"}, "discrete inputs are read-only"),
+        ({"type": "ascii"}, "count is given for ascii"),
+        ({"count": 2}, "count is given for ascii"),
+        ({"type": "u32", "bit": 3}, "bit fields are taken from u16"),
+        ({"bit": 14, "width": 4}, "exceeds the 16-bit register"),
+        ({"width": 4}, "width needs bit"),
+        ({"word_radix": 10000}, "word_radix applies to u32"),
+        ({"scale": 0}, "scale cannot be 0"),
+        ({"enum": {0: "a"}, "scale": 0.1}, "scale/offset apply to numbers"),
+        ({"enum": {0: "a", 1: "a"}}, "enum labels must be unique"),
+        ({"type": "f32", "enum": {0: "a"}}, "enum needs an integer type"),
+        ({"min": 5, "max": 1}, "min 5.0 is above max 1.0"),
+        ({"type": "s16", "sign_from": "x"}, "sign_from takes a magnitude"),
+        ({"unit": "V", "unit_from": "x"}, "give unit or unit_from"),
+        ({"press": 1}, "press (a button) needs access: w"),
+        ({"access": "w", "pulse": True}, "pulse is for a write-only single bit"),
+        ({"access": "rw", "write_function": 3}, "write_function is one of"),
+        ({"write_address": 5}, "need access rw or w"),
+        ({"dangerous": True}, "the entity is read-only"),
+        ({"on_when": {"min": 1}, "access": "rw"}, "derives a read-only boolean"),
+        ({"confidence": "low", "ha": {"enabled": True}}, "low-confidence entity stays disabled"),
+        ({"scale": 0.1, "alarm": True}, "alarm entities are booleans or enums"),
+        ({"ha": {"entity_category": "config"}}, "refuses entity_category config"),
+        (
+            {"enum": {0: "a"}, "ha": {"state_class": "measurement"}},
+            "state_class applies to numbers",
+        ),
+        ({"ha": {"icon": "pump"}}, "String should match pattern"),
+        ({"colour": "red"}, "Extra inputs are not permitted"),
+    ],
+)
+def test_field_errors_name_entity_and_field(fields: dict, message: str) -> None:
+    fields.setdefault("address", 1)
+    rows = errors_of({"pump_speed": {"name": "Pump speed", **fields}})
+    assert any(r.startswith("entities.pump_speed") and message in r for r in rows), rows
+
+
+def test_kinds_and_derived_components() -> None:
+    mapping = make_mapping(
+        {
+            "temp": {"name": "T", "address": 1},
+            "setpoint": {"name": "S", "address": 2, "access": "rw"},
+            "mode": {"name": "M", "address": 3, "access": "rw", "enum": {0: "a", 1: "b"}},
+            "state": {"name": "St", "address": 4, "enum": {0: "a"}},
+            "flag": {"name": "F", "address": 5, "bit": 0},
+            "switch": {"name": "Sw", "address": 5, "bit": 1, "access": "rw"},
+            "reset": {"name": "R", "address": 6, "access": "w", "press": 0},
+            "label": {"name": "L", "address": 7, "type": "ascii", "count": 2, "access": "rw"},
+            "prot": {"name": "P", "address": 2, "on_when": {"min": 100}},
+        }
+    )
+    components = {k: e.component for k, e in mapping.entities.items()}
+    assert components == {
+        "temp": Component.SENSOR,
+        "setpoint": Component.NUMBER,
+        "mode": Component.SELECT,
+        "state": Component.SENSOR,
+        "flag": Component.BINARY_SENSOR,
+        "switch": Component.SWITCH,
+        "reset": Component.BUTTON,
+        "label": Component.TEXT,
+        "prot": Component.BINARY_SENSOR,
+    }
+    assert mapping.entities["temp"].poll_class is PollClass.FAST
+    assert mapping.entities["setpoint"].poll_class is PollClass.SLOW
+
+
+def test_low_confidence_and_diagnostic_are_disabled_by_default() -> None:
+    mapping = make_mapping(
+        {
+            "a": {"name": "A", "address": 1},
+            "b": {"name": "B", "address": 2, "confidence": "low"},
+            "c": {"name": "C", "address": 3, "ha": {"entity_category": "diagnostic"}},
+            "d": {
+                "name": "D",
+                "address": 4,
+                "ha": {"entity_category": "diagnostic", "enabled": True},
+            },
+        }
+    )
+    assert [e.enabled_by_default for e in mapping.entities.values()] == [True, False, False, True]
+
+
+def test_decimals_follow_scale_and_offset() -> None:
+    mapping = make_mapping(
+        {
+            "a": {"name": "A", "address": 1, "scale": 0.1},
+            "b": {"name": "B", "address": 2, "scale": 0.01},
+            "c": {"name": "C", "address": 3, "scale": 1, "offset": 0.5},
+            "d": {"name": "D", "address": 4, "scale": 10},
+            "e": {"name": "E", "address": 5, "scale": 0.001, "precision": 1},
+        }
+    )
+    assert [e.decimals for e in mapping.entities.values()] == [1, 2, 1, 0, 1]
+
+
+# --- references, options, overlaps ----------------------------------------------------
+
+
+def test_references_must_exist_and_have_the_right_kind() -> None:
+    rows = errors_of(
+        {
+            "a": {"name": "A", "address": 1, "unit_from": "nope"},
+            "b": {"name": "B", "address": 2, "sign_from": "a", "access": "rw"},
+            "c": {"name": "C", "address": 3, "max_from": "e"},
+            "d": {"name": "D", "address": 4, "unit_from": "a"},
+            "e": {"name": "E", "address": 5, "enum": {0: "x"}},
+        }
+    )
+    assert "entities.a.unit_from: no entity 'nope'" in rows
+    assert "entities.b.sign_from: 'a' must be a 1-bit field of a register" in rows
+    assert "entities.c.max_from: 'e' must be a number entity" in rows
+    assert "entities.d.unit_from: 'a' must be an enum entity" in rows
+
+
+def test_status_must_name_an_entity() -> None:
+    assert errors_of({"a": {"name": "A", "address": 1}}, status="b") == ["status: no entity 'b'"]
+
+
+def test_options_select_model_variants() -> None:
+    options = {
+        "register_9f": {"description": "idx 0x9F", "choices": ["pcb", "current"], "default": "pcb"}
+    }
+    mapping = make_mapping(
+        {
+            "pcb_temperature": {"name": "PCB", "address": 159, "when": {"register_9f": "pcb"}},
+            "input_current": {
+                "name": "In",
+                "address": 159,
+                "scale": 0.1,
+                "when": {"register_9f": ["current"]},
+            },
+        },
+        options=options,
+    )
+    assert list(mapping.points()) == ["pcb_temperature"]
+    assert list(mapping.points({"register_9f": "current"})) == ["input_current"]
+
+
+def test_variants_change_a_reading_under_the_same_key() -> None:
+    options = {
+        "frequency_scale": {"description": "Hz", "choices": ["0.1", "0.01"], "default": "0.1"}
+    }
+    mapping = make_mapping(
+        {
+            "frequency": {
+                "name": "F",
+                "address": 13,
+                "scale": 0.1,
+                "unit": "Hz",
+                "variants": [{"when": {"frequency_scale": "0.01"}, "scale": 0.01}],
+            },
+        },
+        options=options,
+    )
+    assert mapping.points()["frequency"].entity.scale == 0.1
+    assert mapping.points({"frequency_scale": "0.01"})["frequency"].entity.scale == 0.01
+
+
+def test_bad_options_are_named() -> None:
+    options = {"model": {"description": "m", "choices": ["a", "b"], "default": "c"}}
+    rows = errors_of(
+        {
+            "x": {"name": "X", "address": 1, "when": {"model": "z"}},
+            "y": {"name": "Y", "address": 2, "when": {"colour": "red"}},
+            "z": {"name": "Z", "address": 3, "variants": [{"when": {"model": "a"}, "scale": 0}]},
+        },
+        options=options,
+    )
+    assert "options.model.default: 'c' is not one of ['a', 'b']" in rows
+    assert "entities.x.when: model='z' is not a choice" in rows
+    assert "entities.y.when: unknown option 'colour'" in rows
+    assert any(r.startswith("entities.z.variants.0:") and "scale cannot be 0" in r for r in rows)
+
+
+def test_reference_missing_for_some_options_is_an_error() -> None:
+    options = {"model": {"description": "m", "choices": ["a", "b"], "default": "a"}}
+    rows = errors_of(
+        {
+            "unit": {"name": "U", "address": 1, "enum": {0: "bar"}, "when": {"model": "a"}},
+            "value": {"name": "V", "address": 2, "unit_from": "unit"},
+        },
+        options=options,
+    )
+    assert rows == ["entities.value.unit_from: 'unit' is missing for some option values"]
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "problem"),
+    [
+        ({"address": 1}, {"address": 1}, "a second whole value on the same register"),
+        ({"address": 1, "type": "u32"}, {"address": 2}, "a second whole value"),
+        ({"address": 1, "type": "u32"}, {"address": 2, "bit": 0}, "a bit field inside a multi"),
+        ({"address": 1, "bit": 0, "width": 4}, {"address": 1, "bit": 3}, "overlapping bit fields"),
+        ({"address": 1, "table": "coil"}, {"address": 1, "table": "coil"}, "a second whole value"),
+    ],
+)
+def test_overlaps_that_make_no_sense(first: dict, second: dict, problem: str) -> None:
+    rows = errors_of({"a": {"name": "A", **first}, "b": {"name": "B", **second}})
+    assert len(rows) == 1 and rows[0].startswith("entities.b.address: ") and problem in rows[0]
+
+
+def test_overlaps_that_make_sense() -> None:
+    options = {"m": {"description": "m", "choices": ["a", "b"], "default": "a"}}
+    make_mapping(
+        {
+            "status": {"name": "S", "address": 1, "bit": 0, "width": 4, "enum": {0: "off"}},
+            "combo": {"name": "C", "address": 1, "bit": 7},
+            "word": {"name": "W", "address": 1, "ha": {"entity_category": "diagnostic"}},
+            "limit": {"name": "L", "address": 2, "access": "rw"},
+            "limit_on": {"name": "LO", "address": 2, "on_when": {"min": 100}},
+            "va": {"name": "VA", "address": 3, "when": {"m": "a"}},
+            "vb": {"name": "VB", "address": 3, "when": {"m": "b"}},
+            "cmd_run": {"name": "Run", "address": 4, "access": "w", "press": 1},
+            "cmd_stop": {"name": "Stop", "address": 4, "access": "w", "press": 6},
+            "coil_alarm": {"name": "Alarm", "address": 0, "table": "coil"},
+            "coil_start": {
+                "name": "Start",
+                "address": 0,
+                "table": "coil",
+                "access": "w",
+                "press": True,
+            },
+        },
+        options=options,
+    )
+
+
+def test_reserved_and_segments_are_respected() -> None:
+    rows = errors_of(
+        {"a": {"name": "A", "address": 12}, "b": {"name": "B", "address": 19, "type": "u32"}},
+        protocol={
+            "reserved": [{"start": 10, "end": 15}],
+            "segments": [{"name": "pd", "start": 0, "end": 19}],
+        },
+    )
+    assert rows == [
+        "entities.a.address: reads reserved holding 12",
+        "entities.b.address: the value crosses a segment boundary",
+    ]
+
+
+def test_keys_are_snake_case() -> None:
+    rows = errors_of({"Pump-Speed": {"name": "P", "address": 1}})
+    assert rows == [
+        "entities.Pump-Speed: keys are snake_case (a-z, 0-9, _), starting with a letter"
+    ]
+
+
+def test_protocol_quirks_are_expressed() -> None:
+    mapping = make_mapping(
+        {"a": {"name": "A", "address": 1}},
+        protocol={
+            "max_read_registers": 16,
+            "readable_gaps": False,
+            "coil_on_value": 0x00FF,
+            "exceptions": {
+                8: {"name": "busy", "action": "busy"},
+                3: {"name": "crc", "action": "retry"},
+            },
+            "min_request_interval": "1000ms",
+            "keepalive": {"interval": "20s"},
+            "eeprom_write_interval": "1m",
+            "serial": {"stopbits": 2},
+        },
+    )
+    protocol = mapping.protocol
+    assert protocol.max_read_registers == 16 and not protocol.readable_gaps
+    assert protocol.coil_on_value == 0x00FF and protocol.exceptions[8].action == "busy"
+    assert protocol.min_request_interval == 1.0 and protocol.keepalive
+    assert protocol.keepalive.interval == 20.0 and protocol.eeprom_write_interval == 60.0
+
+
+# --- files ------------------------------------------------------------------------------
+
+
+def test_load_error_names_file_entity_and_field(tmp_path: Path) -> None:
+    path = tmp_path / "pump.yaml"
+    path.write_text(HEADER + "entities:\n  speed: {name: Speed, address: 1, scale: zero}\n")
+    with pytest.raises(MappingError) as caught:
+        load_mapping(path)
+    assert caught.value.source == str(path)
+    assert caught.value.issues == (
+        "entities.speed.scale: Input should be a valid number, unable to parse string as a number",
+    )
+    assert str(path) in str(caught.value)
+
+
+def test_duplicate_keys_are_refused() -> None:
+    text = HEADER + "entities:\n  speed: {name: A, address: 1}\n  speed: {name: B, address: 2}\n"
+    with pytest.raises(MappingError, match="duplicate key 'speed'"):
+        parse_mapping(text, "dup.yaml")
+
+
+def test_yaml_merge_keys_work() -> None:
+    text = (
+        HEADER
+        + """
+entities:
+  a: &setting {name: A, address: 1, access: rw, eeprom: true}
+  b: {<<: *setting, name: B, address: 2}
+"""
+    )
+    mapping = parse_mapping(text, "merge.yaml")
+    assert mapping.entities["b"].eeprom and mapping.entities["b"].address == 2
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[1, 2]", "must hold a mapping"),
+        ("a: [", "invalid YAML"),
+    ],
+)
+def test_not_a_mapping(text: str, message: str) -> None:
+    with pytest.raises(MappingError, match=message):
+        parse_mapping(text, "x.yaml")
+
+
+def test_missing_file() -> None:
+    with pytest.raises(MappingError, match="cannot read"):
+        load_mapping(Path("/nonexistent/pump.yaml"))
+
+
+def test_points_link_their_sources() -> None:
+    mapping = make_mapping(
+        {
+            "unit": {"name": "U", "address": 1, "enum": {0: "bar"}},
+            "v": {
+                "name": "V",
+                "address": 2,
+                "unit_from": "unit",
+                "write_address": 9,
+                "access": "rw",
+            },
+        }
+    )
+    point = mapping.points()["v"]
+    assert point.unit_source is not None and point.unit_source.key == "unit"
+    assert point.write_address == 9 and point.table is Table.HOLDING
