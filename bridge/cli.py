@@ -116,15 +116,15 @@ def _show(args: argparse.Namespace, out: TextIO) -> int:
         print(
             f"option {name} = {chosen}  ({', '.join(spec.choices)}): {spec.description}", file=out
         )
-    rows = []
+    rows: list[tuple[str, ...]] = []
     rule = mapping.protocol.addressing
     for key, point in mapping.points(options).items():
         e = point.entity
         unit = e.unit or (f"<{e.unit_from}>" if e.unit_from else "")
         wire = f"{point.address} (0x{point.address:04X})"
         address = format_address(e.address, rule)
-        rows.append((key, address, wire, e.table.value, e.data_type.value, _bits(e)))
-        rows[-1] += (e.access.value, unit, e.component.value)
+        kind = (e.table.value, e.data_type.value, _bits(e), e.access.value)
+        rows.append((key, address, wire, *kind, unit, e.component.value))
     headers = ("KEY", "PRINTED", "WIRE", "TABLE", "TYPE", "BITS", "ACCESS", "UNIT", "HA")
     _table(headers, rows, out)
     return EXIT_OK

@@ -28,7 +28,7 @@ class FrameError(BridgeError):
     """A frame could not be built or parsed (bad CRC/LRC, truncated, unknown function)."""
 
 
-class CoilWordRequest(ModbusPDU):  # type: ignore[misc]
+class CoilWordRequest(ModbusPDU):
     """FC05 with the 16-bit value given explicitly (0xFF00, 0x00FF or 0x0000)."""
 
     function_code = 5
