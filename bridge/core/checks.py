@@ -16,6 +16,7 @@ from pydantic import ValidationError
 
 from bridge.core.address import to_wire
 from bridge.core.entity import Access, DataType, Entity, Table
+from bridge.core.hass import presentation_problems
 from bridge.core.protocol import Protocol
 
 if TYPE_CHECKING:
@@ -58,7 +59,8 @@ def write_function(entity: Entity, protocol: Protocol) -> int:
 def check_mapping(mapping: Mapping) -> list[str]:
     """Every cross-entity problem of ``mapping``, as ``location: message`` rows."""
     rows: list[str] = []
-    for check in (_keys, _addresses, _options, _references, _function_codes, _sentinels):
+    checks = (_keys, _addresses, _options, _references, _function_codes, _sentinels, _presentation)
+    for check in checks:
         rows.extend(check(mapping))
     if not rows:  # overlap checks need valid addresses and options
         rows.extend(_overlaps(mapping))
@@ -195,6 +197,19 @@ def _sentinels(mapping: Mapping) -> Iterator[str]:
         for raw in e.sentinels:
             if not 0 <= raw <= top:
                 yield f"entities.{key}.sentinels: {raw} is outside the raw range 0..{top}"
+
+
+def _presentation(mapping: Mapping) -> Iterator[str]:
+    for key, e in mapping.entities.items():
+        for problem in presentation_problems(e):
+            yield f"entities.{key}.ha: {problem}"
+        for index, variant in enumerate(e.variants):
+            try:
+                applied = e.with_variant(variant)
+            except ValidationError:
+                continue  # reported by _options
+            for problem in presentation_problems(applied):
+                yield f"entities.{key}.variants.{index}.ha: {problem}"
 
 
 def _overlaps(mapping: Mapping) -> Iterator[str]:

@@ -214,7 +214,7 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
         packed = struct.unpack(">HH", struct.pack(">f", number))
         return (_register_write(point, _ordered(entity, join_words(packed, Order.BIG))),)
     raw = _raw_for(point, value, image)
-    if kind is DataType.BOOL:
+    if kind is DataType.BOOL and point.table.is_bits:
         return _coil_writes(point, raw)
     writes: list[Write] = []
     if point.sign is not None:

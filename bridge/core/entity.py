@@ -127,12 +127,20 @@ class Variant(BaseModel):
     precision: int | None = None
     unit: str | None = None
     word_radix: int | None = None
+    min: float | None = None
+    max: float | None = None
+    step: float | None = None
     confidence: Confidence | None = None
     note: str | None = None
     ha: Presentation | None = None
 
     def overrides(self) -> dict[str, Any]:
-        return self.model_dump(exclude={"when"}, exclude_none=True)
+        """The fields this variant sets; ``ha`` fields merge into the entity's own, and an
+        explicit ``null`` there clears one (a device class that no longer fits)."""
+        fields = self.model_dump(exclude={"when", "ha"}, exclude_none=True, exclude_unset=True)
+        if self.ha is not None:
+            fields["ha"] = self.ha.model_dump(exclude_unset=True)
+        return fields
 
 
 class Entity(BaseModel):
@@ -143,7 +151,9 @@ class Entity(BaseModel):
     name: str = Field(min_length=1, description="entity name without the device name")
     address: PrintedAddress
     table: Table = Table.HOLDING
-    type: DataType | None = Field(None, description="default: bool on bit tables, else u16")
+    type: DataType | None = Field(
+        None, description="default: bool on bit tables, else u16; bool on a register: 0/1 word"
+    )
     count: int | None = Field(None, ge=1, le=125, description="registers of an ascii value")
     word_order: Order = Order.BIG
     byte_order: Order = Order.BIG
@@ -190,7 +200,10 @@ class Entity(BaseModel):
     def with_variant(self, variant: Variant) -> Entity:
         """This entity with a variant's fields applied (validated again)."""
         data = self.model_dump(exclude_unset=True, exclude={"variants"})
-        return Entity.model_validate(data | variant.overrides())
+        overrides = variant.overrides()
+        if "ha" in overrides:
+            overrides["ha"] = data.get("ha", {}) | overrides["ha"]
+        return Entity.model_validate(data | overrides)
 
     # --- derived facts -------------------------------------------------------------
 
@@ -291,8 +304,8 @@ def _decimals_of(number: float) -> int:
 def _check_table_type(e: Entity) -> str | None:
     if e.table.is_bits and e.data_type is not DataType.BOOL:
         return f"a {e.table.value} entity has type bool, not {e.data_type.value}"
-    if not e.table.is_bits and e.data_type is DataType.BOOL:
-        return "type bool is for coil and discrete tables; use bit: N on a register"
+    if e.data_type is DataType.BOOL and e.bit is not None:
+        return "a bit field is a boolean already: drop type bool"
     if e.table is Table.DISCRETE and e.writable:
         return "discrete inputs are read-only"
     if e.table is Table.INPUT and e.writable:

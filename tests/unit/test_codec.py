@@ -76,6 +76,14 @@ def test_decode_coil() -> None:
     assert decode(point, image_of(0, table=Table.COIL)) is False
 
 
+def test_whole_register_bool() -> None:
+    point = make_point(type="bool", access="rw")
+    assert decode(point, image_of(1)) is True
+    assert decode(point, image_of(0)) is False
+    assert encode(point, "ON", {}) == (Write(6, H, 0, (1,)),)
+    assert encode(point, False, {}) == (Write(6, H, 0, (0,)),)
+
+
 def test_decode_missing_register() -> None:
     point = make_point(type="u32", address=10)
     with pytest.raises(MissingDataError, match="holding 11"):

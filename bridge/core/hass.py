@@ -1,0 +1,145 @@
+"""Home Assistant's rules for device classes, units and state classes (as of HA 2025.x).
+
+A discovery payload that breaks these makes Home Assistant log an error or a warning and
+drop the unit or the entity, so mappings are checked against them when they load. The
+tables hold the device classes a Modbus device can plausibly use; others are refused
+with the list of known ones, so a new one is added here on purpose.
+"""
+
+from __future__ import annotations
+
+from bridge.core.entity import Component, Entity
+
+_PRESSURE = frozenset({"Pa", "hPa", "kPa", "bar", "cbar", "mbar", "mmHg", "inHg", "psi", "mPa"})
+_ENERGY = frozenset(
+    {"J", "kJ", "MJ", "GJ", "mWh", "Wh", "kWh", "MWh", "GWh", "TWh", "cal", "kcal", "Mcal", "Gcal"}
+)
+_VOLUME = frozenset({"L", "mL", "gal", "fl. oz.", "m³", "ft³", "CCF"})
+
+SENSOR_UNITS: dict[str, frozenset[str | None]] = {
+    "apparent_power": frozenset({"mVA", "VA", "kVA"}),
+    "atmospheric_pressure": frozenset(_PRESSURE),
+    "battery": frozenset({"%"}),
+    "current": frozenset({"A", "mA"}),
+    "distance": frozenset({"km", "m", "cm", "mm", "mi", "nmi", "yd", "in", "ft"}),
+    "duration": frozenset({"d", "h", "min", "s", "ms", "µs"}),
+    "energy": frozenset(_ENERGY),
+    "energy_storage": frozenset(_ENERGY),
+    "frequency": frozenset({"Hz", "kHz", "MHz", "GHz"}),
+    "humidity": frozenset({"%"}),
+    "power": frozenset({"mW", "W", "kW", "MW", "GW", "TW", "BTU/h"}),
+    "power_factor": frozenset({"%", None}),
+    "pressure": frozenset(_PRESSURE),
+    "reactive_energy": frozenset({"varh", "kvarh"}),
+    "reactive_power": frozenset({"mvar", "var", "kvar"}),
+    "temperature": frozenset({"°C", "°F", "K"}),
+    "voltage": frozenset({"µV", "mV", "V", "kV", "MV"}),
+    "volume": frozenset(_VOLUME),
+    "volume_flow_rate": frozenset(
+        {
+            "m³/h",
+            "m³/min",
+            "m³/s",
+            "ft³/min",
+            "L/h",
+            "L/min",
+            "L/s",
+            "gal/h",
+            "gal/min",
+            "mL/s",
+            "gal/d",
+        }
+    ),
+    "volume_storage": frozenset(_VOLUME),
+    "water": frozenset({"L", "gal", "m³", "ft³", "CCF"}),
+}
+
+_TOTALS = frozenset({"total", "total_increasing"})
+_ALL_STATE_CLASSES = frozenset({"measurement", "total", "total_increasing"})
+STATE_CLASSES: dict[str, frozenset[str]] = {
+    "energy": _TOTALS,
+    "energy_storage": frozenset({"measurement"}),
+    "reactive_energy": _TOTALS,
+    "volume": _TOTALS,
+    "water": _TOTALS,
+    "volume_storage": frozenset({"measurement"}),
+}
+
+BINARY_SENSOR_CLASSES = frozenset(
+    {
+        "battery",
+        "battery_charging",
+        "carbon_monoxide",
+        "cold",
+        "connectivity",
+        "door",
+        "garage_door",
+        "gas",
+        "heat",
+        "light",
+        "lock",
+        "moisture",
+        "motion",
+        "moving",
+        "occupancy",
+        "opening",
+        "plug",
+        "power",
+        "presence",
+        "problem",
+        "running",
+        "safety",
+        "smoke",
+        "sound",
+        "tamper",
+        "update",
+        "vibration",
+        "window",
+    }
+)
+SWITCH_CLASSES = frozenset({"outlet", "switch"})
+BUTTON_CLASSES = frozenset({"identify", "restart", "update"})
+
+
+def presentation_problems(entity: Entity) -> list[str]:
+    """What Home Assistant would refuse in this entity's presentation (empty when fine)."""
+    component = entity.component
+    device_class = entity.ha.device_class
+    if component in (Component.SENSOR, Component.NUMBER):
+        return _numeric_problems(entity, device_class)
+    allowed = {
+        Component.BINARY_SENSOR: BINARY_SENSOR_CLASSES,
+        Component.SWITCH: SWITCH_CLASSES,
+        Component.BUTTON: BUTTON_CLASSES,
+    }.get(component, frozenset())
+    if device_class is not None and device_class not in allowed:
+        known = ", ".join(sorted(allowed)) or "none"
+        return [f"device_class {device_class!r} is not one of {component.value}'s ({known})"]
+    return []
+
+
+def _numeric_problems(entity: Entity, device_class: str | None) -> list[str]:
+    problems: list[str] = []
+    if entity.kind != "number":
+        if device_class is not None:
+            problems.append("an enum or text entity takes no device_class (the bridge sets it)")
+        return problems
+    if device_class is None:
+        return problems
+    units = SENSOR_UNITS.get(device_class)
+    if units is None:
+        return [f"unknown device_class {device_class!r} (known: {', '.join(sorted(SENSOR_UNITS))})"]
+    if entity.unit_from is not None:
+        problems.append("a unit read from a register can change category: leave device_class out")
+    elif entity.unit not in units:
+        shown = ", ".join(sorted(str(u) for u in units))
+        problems.append(
+            f"unit {entity.unit!r} is not valid for device_class {device_class} ({shown})"
+        )
+    state_class = entity.ha.state_class
+    allowed = STATE_CLASSES.get(device_class, _ALL_STATE_CLASSES)
+    if state_class is not None and state_class not in allowed:
+        problems.append(
+            f"state_class {state_class!r} is impossible for device_class {device_class}"
+        )
+    return problems
