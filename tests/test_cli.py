@@ -19,7 +19,11 @@ EXAMPLE = ROOT / "examples" / "config.yaml"
 def run(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "bridge.cli", *args],
-        capture_output=True, text=True, timeout=60, check=False, cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        cwd=ROOT,
     )
 
 
@@ -59,7 +63,9 @@ def test_mappings_list_names_all_shipped(capsys: pytest.CaptureFixture[str]) -> 
 
 def test_mappings_show_prints_printed_and_wire_address(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["mappings", "show", "nastec_vasco"]) == 0
-    line = next(row for row in capsys.readouterr().out.splitlines() if row.startswith("actual_value "))
+    line = next(
+        row for row in capsys.readouterr().out.splitlines() if row.startswith("actual_value ")
+    )
     assert "0x0098" in line
     assert "151 (0x0097)" in line
 

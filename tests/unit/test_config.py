@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.config import SerialBus, TcpBus, load_config
+from bridge.config import Config, SerialBus, TcpBus, load_config
 from bridge.errors import ConfigError
 
 MAPPING = """
@@ -66,8 +66,6 @@ def test_good_config(tmp_path: Path) -> None:
 
 
 def test_defaults() -> None:
-    from bridge.config import Config
-
     config = Config.model_validate({"buses": [{"id": "b", "transport": "tcp", "host": "h"}]})
     assert config.mqtt.url == "mqtt://127.0.0.1:1883"
     assert config.mqtt.port == 1883
@@ -116,12 +114,18 @@ devices:
         (("id: pump", "id: Pump!"), "devices.Pump!.id: ids are lowercase"),
         (("transport: rtu", "transport: can"), "buses.rs485: Input tag 'can' found"),
         (("mapping: t1.yaml", "mapping: nope"), "devices.pump.mapping: nope: no shipped mapping"),
-        (("mapping: t1.yaml", "mapping: t1.yaml, options: {model: z}"),
-         "devices.pump.options.model: 'z' is not one of ('a', 'b')"),
-        (("mapping: t1.yaml", "mapping: t1.yaml, options: {colour: red}"),
-         "devices.pump.options.colour: the mapping has no such option (model)"),
-        (("mapping: t1.yaml", "mapping: t1.yaml, poll: {fast: soon}"),
-         "devices.pump.poll.fast: invalid duration 'soon'"),
+        (
+            ("mapping: t1.yaml", "mapping: t1.yaml, options: {model: z}"),
+            "devices.pump.options.model: 'z' is not one of ('a', 'b')",
+        ),
+        (
+            ("mapping: t1.yaml", "mapping: t1.yaml, options: {colour: red}"),
+            "devices.pump.options.colour: the mapping has no such option (model)",
+        ),
+        (
+            ("mapping: t1.yaml", "mapping: t1.yaml, poll: {fast: soon}"),
+            "devices.pump.poll.fast: invalid duration 'soon'",
+        ),
         (("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, parity: X"), "buses.rs485.rtu.parity"),
     ],
 )
@@ -168,11 +172,14 @@ def test_ascii_bus_needs_an_ascii_device(tmp_path: Path) -> None:
     assert issues(tmp_path, text) == ("devices.pump.bus: T1 does not speak Modbus ASCII",)
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("- a\n- b\n", "must hold a mapping"),
-    ("buses: [\n", "invalid YAML"),
-    ("mqtt: {}\n", "buses: Field required"),
-])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("- a\n- b\n", "must hold a mapping"),
+        ("buses: [\n", "invalid YAML"),
+        ("mqtt: {}\n", "buses: Field required"),
+    ],
+)
 def test_not_a_config(tmp_path: Path, text: str, message: str) -> None:
     rows = issues(tmp_path, text)
     assert any(message in row for row in rows), rows

@@ -469,8 +469,10 @@ def test_points_link_their_sources() -> None:
     [
         ({"unit": "bar", "ha": {"device_class": "temperature"}}, "unit 'bar' is not valid for"),
         ({"unit": "rpm", "ha": {"device_class": "speed"}}, "unknown device_class 'speed'"),
-        ({"unit": "kWh", "ha": {"device_class": "energy", "state_class": "measurement"}},
-         "state_class 'measurement' is impossible for device_class energy"),
+        (
+            {"unit": "kWh", "ha": {"device_class": "energy", "state_class": "measurement"}},
+            "state_class 'measurement' is impossible for device_class energy",
+        ),
         ({"enum": {0: "a"}, "ha": {"device_class": "enum"}}, "takes no device_class"),
         ({"bit": 0, "ha": {"device_class": "temperature"}}, "is not one of binary_sensor's"),
         ({"access": "w", "press": 1, "ha": {"device_class": "problem"}}, "button's"),
@@ -482,31 +484,58 @@ def test_presentation_home_assistant_refuses(fields: dict, message: str) -> None
 
 
 def test_unit_from_register_takes_no_device_class() -> None:
-    rows = errors_of({
-        "unit": {"name": "U", "address": 1, "enum": {0: "bar"}},
-        "v": {"name": "V", "address": 2, "unit_from": "unit", "ha": {"device_class": "pressure"}},
-    })
-    assert rows == ["entities.v.ha: a unit read from a register can change category: "
-                    "leave device_class out"]
+    rows = errors_of(
+        {
+            "unit": {"name": "U", "address": 1, "enum": {0: "bar"}},
+            "v": {
+                "name": "V",
+                "address": 2,
+                "unit_from": "unit",
+                "ha": {"device_class": "pressure"},
+            },
+        }
+    )
+    assert rows == [
+        "entities.v.ha: a unit read from a register can change category: leave device_class out"
+    ]
 
 
 def test_presentation_home_assistant_accepts() -> None:
-    make_mapping({
-        "a": {"name": "A", "address": 1, "unit": "kWh", "type": "u32",
-              "ha": {"device_class": "energy", "state_class": "total_increasing"}},
-        "b": {"name": "B", "address": 3, "unit": "°C", "ha": {"device_class": "temperature"}},
-        "c": {"name": "C", "address": 4, "bit": 0, "alarm": True,
-              "ha": {"device_class": "problem"}},
-        "d": {"name": "D", "address": 5, "ha": {"device_class": "power_factor"}},
-        "e": {"name": "E", "address": 6, "unit": "rpm"},
-    })
+    make_mapping(
+        {
+            "a": {
+                "name": "A",
+                "address": 1,
+                "unit": "kWh",
+                "type": "u32",
+                "ha": {"device_class": "energy", "state_class": "total_increasing"},
+            },
+            "b": {"name": "B", "address": 3, "unit": "°C", "ha": {"device_class": "temperature"}},
+            "c": {
+                "name": "C",
+                "address": 4,
+                "bit": 0,
+                "alarm": True,
+                "ha": {"device_class": "problem"},
+            },
+            "d": {"name": "D", "address": 5, "ha": {"device_class": "power_factor"}},
+            "e": {"name": "E", "address": 6, "unit": "rpm"},
+        }
+    )
 
 
 def test_variant_presentation_is_checked_and_ha_merges() -> None:
     options = {"u": {"description": "u", "choices": ["A", "pct"], "default": "A"}}
-    entity = {"name": "I", "address": 1, "unit": "A", "access": "rw", "min": 0, "max": 600,
-              "ha": {"device_class": "current", "entity_category": "config"},
-              "variants": [{"when": {"u": "pct"}, "unit": "%", "max": 300}]}
+    entity = {
+        "name": "I",
+        "address": 1,
+        "unit": "A",
+        "access": "rw",
+        "min": 0,
+        "max": 600,
+        "ha": {"device_class": "current", "entity_category": "config"},
+        "variants": [{"when": {"u": "pct"}, "unit": "%", "max": 300}],
+    }
     rows = errors_of({"i": entity}, options=options)
     assert any(r.startswith("entities.i.variants.0.ha: unit '%'") for r in rows), rows
     entity["variants"][0]["ha"] = {"device_class": None}
