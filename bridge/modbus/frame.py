@@ -19,13 +19,9 @@ from pymodbus.pdu import register_message as registers
 
 from bridge.core.entity import Table
 from bridge.core.request import Read, Write
-from bridge.errors import BridgeError
+from bridge.errors import FrameError
 
 FramerName = Literal["rtu", "ascii"]
-
-
-class FrameError(BridgeError):
-    """A frame could not be built or parsed (bad CRC/LRC, truncated, unknown function)."""
 
 
 class CoilWordRequest(ModbusPDU):
@@ -42,6 +38,27 @@ class CoilWordRequest(ModbusPDU):
         self.address, value = struct.unpack(">HH", data[:4])
         self.registers = [value]
         self.bits = [value != 0]
+
+
+class TolerantRegistersResponse(registers.ReadHoldingRegistersResponse):
+    """FC03 reply that also takes a 2-byte byte count (the P2 drive with F9.05 = 0).
+
+    A standard reply never carries a byte count of 0, so a 0 there marks the long form
+    ``unit 03 00 nn data... crc`` unambiguously; both forms decode to the same registers.
+    """
+
+    @classmethod
+    def calculateRtuFrameSize(cls, data: bytes) -> int:  # noqa: N802 - pymodbus' name
+        if len(data) < 4:
+            return 0
+        if data[2] == 0:
+            return data[3] + 6
+        return data[2] + 5
+
+    def decode(self, data: bytes) -> None:
+        if len(data) >= 2 and data[0] == 0:
+            data = data[1:]
+        super().decode(data)
 
 
 _READS: dict[Table, type[ModbusPDU]] = {
@@ -69,9 +86,14 @@ def request_pdu(request: Read | Write, unit: int) -> ModbusPDU:
     raise FrameError(f"function {request.function} is not a write")
 
 
+CUSTOM_PDUS: tuple[type[ModbusPDU], ...] = (CoilWordRequest,)
+CLIENT_RESPONSES: tuple[type[ModbusPDU], ...] = (CoilWordRequest, TolerantRegistersResponse)
+
+
 def _decoder(is_server: bool) -> DecodePDU:
     decoder = DecodePDU(is_server)
-    decoder.register(CoilWordRequest)
+    for custom in CUSTOM_PDUS if is_server else CLIENT_RESPONSES:
+        decoder.register(custom)
     return decoder
 
 

@@ -2,7 +2,7 @@
 
 R1/R3 are the manual's RTU example (CRC computed by the document), A1/A3/A4 its ASCII
 example (LRC printed and verified), D1-D20 frames the document derived. R2 is the reply
-with F9.05 = 0 (2-byte byte count): a standard parser must reject it for now.
+with F9.05 = 0 (2-byte byte count): the bridge's FC03 reply PDU decodes both forms.
 """
 
 from __future__ import annotations
@@ -38,10 +38,17 @@ def test_r1_r3_read_f0_01_f0_02() -> None:
     assert decoded(POINTS, "parameter_f0_02", image) == 0
 
 
-def test_r2_non_standard_byte_count_is_rejected() -> None:
-    """F9.05 = 0 answers with a 2-byte byte count (00 04): not a standard frame."""
+def test_r2_non_standard_byte_count_decodes_like_r3() -> None:
+    """F9.05 = 0 answers with a 2-byte byte count (00 04); it decodes to R3's values."""
+    read = read_of(POINTS, "parameter_f0_01", "parameter_f0_02")
+    image = image_from(read, hexbytes("01 03 00 04 13 88 00 00 C7 A9"))
+    assert decoded(POINTS, "parameter_f0_01", image) == 5000
+    assert decoded(POINTS, "parameter_f0_02", image) == 0
+
+
+def test_r2_with_a_broken_crc_is_still_rejected() -> None:
     with pytest.raises(FrameError):
-        parse_frame(hexbytes("01 03 00 04 13 88 00 00 C7 A9"))
+        parse_frame(hexbytes("01 03 00 04 13 88 00 00 C7 AA"))
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,214 @@
+"""One scheduler per bus: one frame in flight, the inter-frame silence, writes before polls.
+
+Devices submit jobs and await them. The scheduler runs the most urgent job whose unit
+may be addressed now (``min_interval`` per unit, e.g. the Smartgen's 1 s between
+requests): a command waits at most for the one transaction in flight, and a unit that
+must rest does not hold up the others. Between two frames the bus stays silent for at
+least 3.5 characters at its baud rate. A lost port or gateway is reopened with backoff
+while jobs wait; every job still ends in its own deadline's error, never hangs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import time
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from bridge.core.health import exception_meaning
+from bridge.core.protocol import Protocol
+from bridge.core.request import Read, Write
+from bridge.errors import BusError, DeviceExceptionError, DeviceTimeoutError, FrameError
+from bridge.modbus.transport import Transport
+
+log = logging.getLogger(__name__)
+
+REOPEN_INITIAL = 0.5
+REOPEN_MAX = 30.0
+
+
+class Priority(IntEnum):
+    WRITE = 0  # commands: before anything else
+    READ_NOW = 1  # reads for a command (read-modify-write, read-back, get)
+    POLL = 2
+
+
+@dataclass(order=True, slots=True)
+class _Job:
+    priority: int
+    sequence: int
+    unit: int = field(compare=False)
+    request: Read | Write = field(compare=False)
+    timeout: float = field(compare=False)
+    retries: int = field(compare=False)
+    protocol: Protocol = field(compare=False)
+    future: asyncio.Future[tuple[int, ...]] = field(compare=False)
+
+
+@dataclass(slots=True)
+class BusCounters:
+    """What the bus did, for health reports."""
+
+    transactions: int = 0
+    timeouts: int = 0
+    frame_errors: int = 0
+    busy_seconds: float = 0.0
+    reopenings: int = 0
+
+
+class BusScheduler:
+    """Serialises all traffic of one bus."""
+
+    def __init__(self, transport: Transport, gap: float) -> None:
+        self.transport = transport
+        self.gap = gap
+        self.counters = BusCounters()
+        self._queue: list[_Job] = []
+        self._sequence = itertools.count()
+        self._wakeup = asyncio.Event()
+        self._last_end = 0.0
+        self._unit_last: dict[int, float] = {}
+        self._reopen_delay = 0.0
+        self._reopen_at = 0.0
+
+    @property
+    def bus_id(self) -> str:
+        return self.transport.bus.id
+
+    async def submit(
+        self,
+        unit: int,
+        request: Read | Write,
+        *,
+        timeout: float,
+        priority: Priority = Priority.POLL,
+        retries: int = 0,
+        protocol: Protocol | None = None,
+    ) -> tuple[int, ...]:
+        """Queue one transaction and wait for its result (or its error).
+
+        ``protocol`` gives the device's own exception meanings and its minimum time
+        between two requests; ``retries`` resends after a timeout or a transmission error.
+        """
+        future: asyncio.Future[tuple[int, ...]] = asyncio.get_running_loop().create_future()
+        job = _Job(
+            priority,
+            next(self._sequence),
+            unit,
+            request,
+            timeout,
+            retries,
+            protocol or Protocol(),
+            future,
+        )
+        self._queue.append(job)
+        self._wakeup.set()
+        return await future
+
+    async def run(self) -> None:
+        """Serve jobs until cancelled."""
+        try:
+            while True:
+                job = await self._next_job()
+                await self._serve(job)
+        finally:
+            for job in self._queue:
+                if not job.future.done():
+                    job.future.cancel()
+            self.transport.close()
+
+    async def _next_job(self) -> _Job:
+        """The most urgent job whose unit may be addressed now (waits for one if none)."""
+        while True:
+            self._queue = sorted(j for j in self._queue if not j.future.done())
+            now = time.monotonic()
+            start = max(now, self._last_end + self.gap)
+            ready_at = [(self._unit_ready(job, start), job) for job in self._queue]
+            for when, job in ready_at:
+                if when <= start:
+                    self._queue.remove(job)
+                    if start > now:
+                        await asyncio.sleep(start - now)
+                    return job
+            earliest = min((when for when, _ in ready_at), default=None)
+            self._wakeup.clear()
+            delay = None if earliest is None else max(0.0, earliest - now)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wakeup.wait(), delay)
+
+    def _unit_ready(self, job: _Job, start: float) -> float:
+        last = self._unit_last.get(job.unit)
+        interval = job.protocol.min_request_interval
+        return start if last is None else max(start, last + interval)
+
+    async def _serve(self, job: _Job) -> None:
+        """Run one job; resend after a timeout or a transmission error while retries last."""
+        for attempt in range(job.retries + 1):
+            if job.future.done():  # the submitter gave up (cancelled)
+                return
+            try:
+                await self._ensure_open()
+                values = await self._transaction(job)
+            except DeviceExceptionError as raw:
+                meaning = exception_meaning(raw.code, job.protocol)
+                error: Exception = DeviceExceptionError(raw.code, meaning.name, meaning.action)
+                resend = meaning.action == "retry"
+            except DeviceTimeoutError as timeout:
+                error, resend = timeout, True
+            except (BusError, FrameError) as failure:
+                error, resend = failure, False
+            else:
+                if not job.future.done():
+                    job.future.set_result(values)
+                return
+            if not resend or attempt == job.retries:
+                _settle(job, error)
+                return
+
+    async def _transaction(self, job: _Job) -> tuple[int, ...]:
+        started = time.monotonic()
+        try:
+            return await self.transport.execute(job.unit, job.request, job.timeout)
+        except DeviceTimeoutError:
+            self.counters.timeouts += 1
+            raise
+        except FrameError:
+            self.counters.frame_errors += 1
+            raise
+        finally:
+            ended = time.monotonic()
+            self.counters.transactions += 1
+            self.counters.busy_seconds += ended - started
+            self._last_end = ended
+            self._unit_last[job.unit] = ended
+
+    async def _ensure_open(self) -> None:
+        """Open the port if needed; while it stays down, fail fast until the next try."""
+        if self.transport.connected:
+            return
+        now = time.monotonic()
+        if now < self._reopen_at:
+            raise BusError(
+                f"{self.bus_id}: bus down, next attempt in {self._reopen_at - now:.1f} s"
+            )
+        try:
+            await self.transport.open()
+        except BusError as exc:
+            if self._reopen_delay == 0:
+                log.warning("%s", exc)
+            self.counters.reopenings += 1
+            self._reopen_delay = min(REOPEN_MAX, max(REOPEN_INITIAL, self._reopen_delay * 2))
+            self._reopen_at = time.monotonic() + self._reopen_delay
+            raise
+        if self._reopen_delay:
+            log.info("%s: bus back", self.bus_id)
+        self._reopen_delay = 0.0
+        self._reopen_at = 0.0
+
+
+def _settle(job: _Job, exc: Exception) -> None:
+    if not job.future.done():
+        job.future.set_exception(exc)

@@ -1,0 +1,103 @@
+"""Device health: offline after N failures, capped exponential backoff, back by itself."""
+
+from __future__ import annotations
+
+import pytest
+
+from bridge.core.health import (
+    DeviceHealth,
+    HealthPolicy,
+    Outcome,
+    Transition,
+    exception_meaning,
+)
+from bridge.core.protocol import ExceptionMeaning, Protocol
+
+POLICY = HealthPolicy(offline_after=3, backoff_initial=5, backoff_max=40, backoff_factor=2)
+
+
+def test_first_answer_brings_the_device_online() -> None:
+    health = DeviceHealth(POLICY)
+    assert health.online is None
+    assert health.record(Outcome.OK, 0.0, latency=0.02) is Transition.ONLINE
+    assert health.record(Outcome.OK, 1.0, latency=0.03) is None
+    assert health.online is True
+    assert health.last_latency == 0.03
+    assert health.last_success == 1.0
+
+
+def test_offline_after_n_consecutive_failures_then_backoff_doubles_to_the_cap() -> None:
+    health = DeviceHealth(POLICY)
+    health.record(Outcome.OK, 0.0)
+    assert health.record(Outcome.TIMEOUT, 1.0) is None
+    assert health.record(Outcome.TIMEOUT, 2.0) is None
+    assert health.record(Outcome.TIMEOUT, 3.0) is Transition.OFFLINE
+    assert health.online is False
+    assert health.next_attempt == 8.0
+    assert not health.may_poll(7.9)
+    assert health.may_poll(8.0)
+    backoffs = []
+    now = 8.0
+    for _ in range(5):
+        assert health.record(Outcome.TIMEOUT, now) is None
+        backoffs.append(health.backoff)
+        now = health.next_attempt
+    assert backoffs == [10, 20, 40, 40, 40]
+    assert health.record(Outcome.OK, now) is Transition.ONLINE
+    assert health.backoff == 0
+    assert health.consecutive_failures == 0
+    assert health.may_poll(now)
+
+
+def test_busy_and_refused_prove_the_device_alive() -> None:
+    health = DeviceHealth(POLICY)
+    for now in range(10):
+        health.record(Outcome.BUSY if now % 2 else Outcome.REFUSED, float(now), code=8)
+    assert health.online is True
+    assert health.busy == 5
+    assert health.exceptions[8] == 10
+    assert health.errors == 0
+
+
+def test_failure_exceptions_count_towards_offline() -> None:
+    health = DeviceHealth(POLICY)
+    for now in range(3):
+        transition = health.record(Outcome.FAILED, float(now), code=4)
+    assert transition is Transition.OFFLINE
+    assert health.timeouts == 0
+    assert health.errors == 3
+
+
+def test_counters_and_latency_percentiles() -> None:
+    health = DeviceHealth(POLICY)
+    assert health.percentile(0.5) is None
+    for i in range(1, 101):
+        health.record(Outcome.OK, float(i), latency=i / 1000)
+    health.record(Outcome.TIMEOUT, 200.0)
+    assert health.requests == 101
+    assert health.timeouts == 1
+    assert health.percentile(0.5) == 0.05
+    assert health.percentile(0.95) == 0.095
+
+
+@pytest.mark.parametrize(
+    ("code", "declared", "name", "action"),
+    [
+        (2, {}, "illegal data address", "refused"),
+        (6, {}, "server device busy", "busy"),
+        (4, {}, "server device failure", "fail"),
+        (0x42, {}, "exception 66", "fail"),
+        (
+            8,
+            {8: ExceptionMeaning(name="busy (EEPROM write)", action="busy")},
+            "busy (EEPROM write)",
+            "busy",
+        ),
+        (4, {4: ExceptionMeaning(name="CRC error", action="retry")}, "CRC error", "retry"),
+    ],
+)
+def test_exception_meaning_prefers_the_device_manual(
+    code: int, declared: dict, name: str, action: str
+) -> None:
+    meaning = exception_meaning(code, Protocol(exceptions=declared))
+    assert (meaning.name, meaning.action) == (name, action)
