@@ -7,6 +7,7 @@ one. Real pymodbus traffic is covered in tests/integration.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import time
 from dataclasses import dataclass, field
 
@@ -107,7 +108,7 @@ async def test_the_gap_separates_frames() -> None:
     scheduler, task = await started(transport, gap=0.05)
     await asyncio.gather(*(scheduler.submit(u, READ, timeout=1) for u in (1, 2, 3)))
     stamps = [t for _, _, t in transport.calls]
-    assert all(later - earlier >= 0.05 for earlier, later in zip(stamps, stamps[1:]))
+    assert all(later - earlier >= 0.05 for earlier, later in itertools.pairwise(stamps))
     await stop(task)
 
 
