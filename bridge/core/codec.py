@@ -222,8 +222,14 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
             writes.extend(encode_field(point.sign, int(raw < 0), image))
         raw = abs(raw)
     if entity.field_width is not None:
-        if entity.pulse:
-            return encode_field(point, 1, image) + encode_field(point, 0, image, after=1)
+        if entity.pulse:  # a rising edge: 0 first if the bit was left at 1, then 1, then 0
+            was_set = bool(decode(point, image))
+            clear = encode_field(point, 0, image) if was_set else ()
+            return (
+                clear
+                + encode_field(point, 1, image, after=0)
+                + encode_field(point, 0, image, after=1)
+            )
         return tuple(writes) + encode_field(point, raw, image)
     bits = 32 if entity.register_count == 2 else 16
     unsigned = raw & ((1 << bits) - 1)  # two's complement for signed types

@@ -153,6 +153,15 @@ def test_pulse_sets_then_clears_the_bit() -> None:
     )
 
 
+def test_pulse_makes_a_rising_edge_when_the_bit_was_left_set() -> None:
+    point = make_point(access="w", bit=2, pulse=True, press=True)
+    assert encode(point, None, image_of(0x0005)) == (
+        Write(6, H, 0, (0x0001,)),
+        Write(6, H, 0, (0x0005,)),
+        Write(6, H, 0, (0x0001,)),
+    )
+
+
 @pytest.mark.parametrize(
     ("on_value", "value", "word"),
     [(0xFF00, True, 0xFF00), (0x00FF, "ON", 0x00FF), (0x00FF, "OFF", 0)],
