@@ -1,0 +1,399 @@
+"""What a simulated device holds and accepts: pure logic behind ``bridge.modbus.simulator``.
+
+* ``initial_image(mapping, points)``: a plausible register image (status running, alarms
+  off, settings inside their limits, limit registers consistent, counters in the thousands);
+* ``words_for(point, value, image)``: the words that store ``value`` at the point's READ
+  address, whatever its access (a read-only measurement can be set this way);
+* ``build_rules(mapping, points, quirks)``: which reads and writes the device answers with
+  an exception, and which;
+* ``build_movers(points, image)`` / ``advance(movers, image, rng)``: measurements that
+  wander inside their range and counters that count, deterministic for a seeded ``rng``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import random
+from collections.abc import Mapping as AnyMapping
+from dataclasses import dataclass
+
+from bridge.core.address import to_wire
+from bridge.core.codec import Image, Value, decode, encode, limits_of, raw_bounds, scale_value
+from bridge.core.entity import Access, DataType, Table
+from bridge.core.mapping import Mapping, Point
+from bridge.core.protocol import Protocol
+from bridge.core.request import Write
+from bridge.errors import ValueRejectedError
+
+Cell = tuple[Table, int]
+
+_COUNTER_CLASSES = ("total", "total_increasing")
+_COUNTER_START = 3000  # raw: "a few thousand"
+_SMALL_RAW = 100
+_FAULT_WORDS = ("fault", "alarm", "error", "trip", "fail")
+_TRUE_WORDS = ("ready", "normal")
+_AS_REGISTER = {  # a read-write copy of an entity, without limits, writing where it reads
+    "access": Access.READ_WRITE,
+    "press": None,
+    "pulse": False,
+    "min": None,
+    "max": None,
+    "write_function": None,
+    "write_address": None,
+}
+_TYPICAL = {  # a plausible reading per unit, used when it fits the entity's range
+    "V": 230, "Hz": 50, "A": 12, "W": 1500, "kW": 15, "kvar": 4, "kVA": 16, "°C": 40,
+    "%": 50, "rpm": 1480, "kPa": 350, "bar": 3, "s": 10, "min": 30, "h": 120, "Ω": 120,
+}  # fmt: skip
+
+
+@dataclass(frozen=True, slots=True)
+class Quirks:
+    """How a simulated unit deviates from a well-behaved device (switchable at runtime)."""
+
+    max_read_registers: int | None = None  # None: the mapping's (and its segments') limits
+    refuse_gaps: bool | None = None  # None: not protocol.readable_gaps
+    refused: frozenset[int] = frozenset()  # holding addresses that answer exception 02
+    exception_code: int | None = None  # answer every request with this code
+    coil_on_value: int | None = None  # None: protocol.coil_on_value
+    latency: float = 0.0  # seconds added before every answer
+    dead: bool = False  # no answer at all
+    two_byte_count: bool = False  # RTU FC03 replies carry a 2-byte byte count (P2 F9.05 = 0)
+
+
+# --- storing values -------------------------------------------------------------------
+
+
+def words_for(point: Point, value: object, image: Image) -> dict[Cell, int]:
+    """The cells that hold ``value`` at the point's read address (ValueRejectedError if the
+    register cannot hold it, e.g. a sentinel). Access, write address and limits are ignored."""
+    entity = point.entity.model_copy(update=_AS_REGISTER)
+    plain = dataclasses.replace(
+        point,
+        entity=entity,
+        write_address=point.address,
+        write_function=None,
+        min_source=None,
+        max_source=None,
+    )
+    cells: dict[Cell, int] = {}
+    for write in encode(plain, value, image):
+        cells |= stored_cells(write)
+    return cells
+
+
+def stored_cells(write: Write) -> dict[Cell, int]:
+    """What a write leaves in the image: FC05 stores a bit (any non-zero word is ON)."""
+    if write.function == 5:
+        return {(write.table, write.address): int(write.values[0] != 0)}
+    return {(write.table, write.address + i): value for i, value in enumerate(write.values)}
+
+
+# --- initial values ---------------------------------------------------------------------
+
+
+def initial_image(mapping: Mapping, points: AnyMapping[str, Point]) -> dict[Cell, int]:
+    """Every readable cell of ``points``, holding a plausible value."""
+    image = {(p.table, a): 0 for p in points.values() if p.entity.readable for a in p.span}
+    roles = _limit_roles(points)
+    for key, point in points.items():
+        if not _owns_value(point, points):
+            continue
+        value = _initial_value(point, key == mapping.status, roles.get(key, ""))
+        image |= _nearest_storable(point, value, image)
+    for _ in range(len(roles) + 1):  # limit chains settle in a few passes
+        if not _respect_limits(points, image):
+            break
+    return image
+
+
+def _owns_value(point: Point, points: AnyMapping[str, Point]) -> bool:
+    """False for write-only points, derived booleans, and whole words that only show the
+    bit fields other points own (those follow from the fields)."""
+    entity = point.entity
+    if not entity.readable or entity.on_when is not None:
+        return False
+    if entity.field_width is not None:
+        return True
+    return not any(
+        other.entity.field_width is not None
+        and other.table is point.table
+        and other.span == point.span
+        for other in points.values()
+    )
+
+
+def _limit_roles(points: AnyMapping[str, Point]) -> dict[str, str]:
+    roles: dict[str, str] = {}
+    for point in points.values():
+        if point.max_source is not None:
+            roles[point.max_source.key] = "max"
+        if point.min_source is not None:
+            roles.setdefault(point.min_source.key, "min")
+    return roles
+
+
+def _initial_value(point: Point, is_status: bool, role: str) -> Value:
+    entity = point.entity
+    if entity.enum is not None:
+        return _initial_label(point, is_status)
+    if entity.kind == "text":
+        return f"SIM{point.key.upper()}"[: entity.register_count * 2]
+    if entity.kind == "bool":
+        words = point.key.split("_")
+        return not entity.alarm and (is_status or any(word in words for word in _TRUE_WORDS))
+    low, high = number_range(point)
+    value = _plausible_number(point, low, high) * {"min": 0.5, "max": 2.0}.get(role, 1.0)
+    return round(min(max(value, low), high), entity.decimals)
+
+
+def _initial_label(point: Point, is_status: bool) -> Value:
+    entity = point.entity
+    enum = entity.enum or {}
+    if entity.alarm:
+        normal = [raw for raw in entity.normal if raw in enum]
+        return enum[normal[0]] if normal else entity.normal[0]
+    labels = list(enum.values())
+    if is_status:
+        running = [label for label in labels if "running" in label and "stop" not in label]
+        labels = running or labels
+    calm = [label for label in labels if not any(word in label for word in _FAULT_WORDS)]
+    return (calm or labels)[0]
+
+
+def number_range(point: Point) -> tuple[float, float]:
+    """Engineering range a number can take: its register, narrowed by static min/max."""
+    entity = point.entity
+    if entity.data_type is DataType.F32:
+        low, high = -1e6, 1e6
+    else:
+        ends = [scale_value(entity, raw) for raw in raw_bounds(entity)]
+        low, high = min(ends), max(ends)
+    if point.sign is not None:
+        low = -high
+    if entity.min is not None:
+        low = max(low, entity.min)
+    if entity.max is not None:
+        high = min(high, entity.max)
+    return low, high
+
+
+def _plausible_number(point: Point, low: float, high: float) -> float:
+    entity = point.entity
+    if entity.ha.state_class in _COUNTER_CLASSES:
+        return min(float(scale_value(entity, _COUNTER_START)), high)
+    typical = _TYPICAL.get(entity.unit or "")
+    if typical is not None and low <= typical <= high:
+        return typical
+    if entity.min is not None and entity.max is not None:
+        return (entity.min + entity.max) / 2
+    return min(max(float(scale_value(entity, _SMALL_RAW)), low), high)
+
+
+def _nearest_storable(point: Point, value: Value, image: Image) -> dict[Cell, int]:
+    """``value``, or a neighbour one raw step away when ``value`` is a sentinel."""
+    candidates: list[Value] = [value]
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        step = point.entity.scale
+        candidates += [value + step, value - step]
+    for candidate in candidates:
+        try:
+            return words_for(point, candidate, image)
+        except ValueRejectedError:
+            continue
+    return {}
+
+
+def _respect_limits(points: AnyMapping[str, Point], image: dict[Cell, int]) -> bool:
+    """Move values inside their limit registers; True if anything moved."""
+    moved = False
+    for point in points.values():
+        if point.min_source is None and point.max_source is None:
+            continue
+        value = decode(point, image)
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            continue
+        low, high = limits_of(point, image)
+        inside = max(value, low) if low is not None else value
+        inside = min(inside, high) if high is not None else inside
+        if inside != value:
+            image |= _nearest_storable(point, inside, image)
+            moved = True
+    return moved
+
+
+# --- what the device accepts --------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Rules:
+    """The answers of one simulated unit: ``check_read``/``check_write`` return the
+    exception code the device answers with, or None when it serves the request."""
+
+    function_codes: frozenset[int]
+    readable: frozenset[Cell]
+    writable: frozenset[Cell]
+    commands: frozenset[int]  # coil addresses that are commands: writes leave the bit alone
+    forbidden: tuple[tuple[Table, int, int], ...]  # reserved and refused ranges
+    segments: tuple[tuple[Table, int, int, int | None], ...]
+    max_read: int
+    max_bits: int
+    max_write: int
+    limit_code: int
+    refuse_gaps: bool
+    coil_on_value: int
+    fixed_limit: bool  # a quirk set the read limit: segments' own limits do not apply
+
+    def check_read(self, table: Table, address: int, count: int) -> int | None:
+        last = address + count - 1
+        if count > self._read_limit(table, address):
+            return self.limit_code
+        if self._forbidden(table, address, last) or self._crosses_segment(table, address, last):
+            return 2
+        if self.refuse_gaps and any(
+            (table, a) not in self.readable for a in range(address, last + 1)
+        ):
+            return 2
+        return None
+
+    def check_write(self, write: Write) -> int | None:
+        count = len(write.values)
+        last = write.address + count - 1
+        if write.function in (15, 16) and count > self.max_write:
+            return 3
+        if self._forbidden(write.table, write.address, last):
+            return 2
+        if any((write.table, a) not in self.writable for a in range(write.address, last + 1)):
+            return 2
+        if write.function == 5 and write.values[0] not in (0, self.coil_on_value):
+            return 3
+        return None
+
+    def _read_limit(self, table: Table, first: int) -> int:
+        limit = self.max_bits if table.is_bits else self.max_read
+        if self.fixed_limit:
+            return limit
+        for seg_table, low, high, seg_max in self.segments:
+            if seg_table is table and low <= first <= high and seg_max is not None:
+                limit = min(limit, seg_max)
+        return limit
+
+    def _forbidden(self, table: Table, first: int, last: int) -> bool:
+        return any(t is table and first <= high and low <= last for t, low, high in self.forbidden)
+
+    def _crosses_segment(self, table: Table, first: int, last: int) -> bool:
+        return any(
+            t is table and (low <= first <= high) != (low <= last <= high)
+            for t, low, high, _ in self.segments
+        )
+
+
+def build_rules(mapping: Mapping, points: AnyMapping[str, Point], quirks: Quirks) -> Rules:
+    protocol = mapping.protocol
+    rule = protocol.addressing
+    readable = {(p.table, a) for p in points.values() if p.entity.readable for a in p.span}
+    writers = [p for p in points.values() if p.entity.writable]
+    writable = {
+        (p.table, a) for p in writers for a in range(p.write_address, p.write_address + p.count)
+    }
+    reserved = [
+        (r.table, to_wire(r.start, rule), to_wire(r.end or r.start, rule))
+        for r in protocol.reserved
+    ]
+    refused = [(Table.HOLDING, a, a) for a in sorted(quirks.refused)]
+    segments = tuple(
+        (s.table, to_wire(s.start, rule), to_wire(s.end, rule), s.max_read_registers)
+        for s in protocol.segments
+    )
+    coils = [p for p in writers if p.table is Table.COIL]
+    commands = {p.write_address for p in coils if p.entity.access is Access.WRITE}
+    commands -= {p.write_address for p in coils if p.entity.readable}
+    gaps = protocol.readable_gaps if quirks.refuse_gaps is None else not quirks.refuse_gaps
+    on_value = protocol.coil_on_value if quirks.coil_on_value is None else quirks.coil_on_value
+    return Rules(
+        function_codes=frozenset(protocol.function_codes),
+        readable=frozenset(readable),
+        writable=frozenset(writable),
+        commands=frozenset(commands),
+        forbidden=tuple(reserved + refused),
+        segments=segments,
+        max_read=quirks.max_read_registers or protocol.max_read_registers,
+        max_bits=protocol.max_read_bits,
+        max_write=protocol.max_write_registers,
+        limit_code=read_limit_code(protocol),
+        refuse_gaps=not gaps,
+        coil_on_value=on_value,
+        fixed_limit=quirks.max_read_registers is not None,
+    )
+
+
+def read_limit_code(protocol: Protocol) -> int:
+    """The exception a read above the limit gets: a declared code whose name is about the
+    register count (the soft starter's 03), else 02 (illegal data address)."""
+    for code, meaning in sorted(protocol.exceptions.items()):
+        if "count" in meaning.name.lower():
+            return code
+    return 2
+
+
+# --- values that move ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Mover:
+    """A read-only number that changes over time: a measurement or a counter."""
+
+    point: Point
+    low: float
+    high: float
+    step: int  # largest move per tick, in raw units
+    counter: bool
+
+
+def build_movers(points: AnyMapping[str, Point], image: Image) -> tuple[Mover, ...]:
+    """Measurements (state_class measurement) and counters (total, total_increasing)."""
+    sources = set(_limit_roles(points))
+    movers: list[Mover] = []
+    for key, point in points.items():
+        entity = point.entity
+        state = entity.ha.state_class
+        if (
+            entity.access is not Access.READ
+            or entity.kind != "number"
+            or entity.field_width is not None
+            or point.sign is not None
+            or key in sources
+            or state not in ("measurement", *_COUNTER_CLASSES)
+            or not _owns_value(point, points)
+        ):
+            continue
+        value = decode(point, image)
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            continue
+        low, high = number_range(point)
+        spread = max(abs(value) * 0.2, abs(entity.scale) * 10)
+        low, high = max(low, value - spread), min(high, value + spread)
+        step = max(1, round((high - low) / abs(entity.scale) / 20))
+        movers.append(Mover(point, low, high, step, state in _COUNTER_CLASSES))
+    return tuple(movers)
+
+
+def advance(movers: tuple[Mover, ...], image: Image, rng: random.Random) -> dict[Cell, int]:
+    """One tick: the cells that change. Sentinels are skipped, ranges held."""
+    changes: dict[Cell, int] = {}
+    for mover in movers:
+        value = decode(mover.point, image)
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            continue
+        scale = mover.point.entity.scale
+        if mover.counter:
+            target = value + scale
+        else:
+            target = min(
+                max(value + rng.randint(-mover.step, mover.step) * scale, mover.low), mover.high
+            )
+        try:
+            changes |= words_for(mover.point, target, image)
+        except ValueRejectedError:
+            continue
+    return changes

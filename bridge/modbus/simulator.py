@@ -1,0 +1,332 @@
+"""Simulated Modbus devices: a pymodbus 3.16 server built from mappings, quirks switchable.
+
+One ``Simulator`` serves any number of units (each a mapping, its options and its
+``Quirks``) on one TCP port or one serial line. It answers like the device the mapping
+describes: the function codes it supports, its read limit, refused gaps and reserved
+addresses, its FC05 ON word, and at will a fixed exception code, latency, silence, or the
+P2's 2-byte byte count. Read-only measurements wander and counters count every ``tick``
+seconds (``tick <= 0``: values stay still); written registers keep what was written.
+
+The register image of each unit is ours (``bridge.core.simulation``); pymodbus' SimDevice
+blocks are only the buffers its ``action`` hook fills before each answer. They declare every
+address valid (registers 0..65535, bits 0..4095), because pymodbus refuses invalid ones
+before calling the hook (simruntime.py:62-66), which would skip latency and quirks:
+
+* reads: the hook checks the request against ``Rules`` and copies the image into the
+  block (FC01/FC02 pass the exact bit count through a context variable: pymodbus hands
+  the hook the number of 16-bit words, simruntime.py:89-93);
+* writes: every write request a live unit receives is appended to ``writes`` (refused ones
+  too), then checked and stored. FC05 arrives through ``_CoilWord``, which passes the raw
+  16-bit word (pymodbus' own FC05 only knows on/off) and echoes it back;
+* dead units and unknown unit ids: the incoming ``trace_pdu`` hook drops the request, so
+  nothing is executed and nothing is sent (requesthandler.py:73 handles no empty PDU);
+* ``two_byte_count``: the outgoing ``trace_packet`` hook rewrites RTU FC03 replies.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+from collections.abc import Callable, Sequence
+from contextvars import ContextVar
+from dataclasses import dataclass, field
+from typing import Any, Literal, cast
+
+from pymodbus.constants import ExcCodes
+from pymodbus.datastore import ModbusServerContext
+from pymodbus.framer import FramerRTU, FramerType
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu.bit_message import ReadCoilsRequest, ReadDiscreteInputsRequest
+from pymodbus.server import ModbusBaseServer, ModbusSerialServer, ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from bridge.core.codec import Value, decode
+from bridge.core.entity import Table
+from bridge.core.mapping import Mapping, Point
+from bridge.core.request import Write
+from bridge.core.simulation import (
+    Cell,
+    Quirks,
+    advance,
+    build_movers,
+    build_rules,
+    initial_image,
+    stored_cells,
+    words_for,
+)
+from bridge.modbus.frame import CoilWordRequest
+
+__all__ = ["Quirks", "SimulatedUnit", "Simulator", "two_byte_count_frame"]
+
+_TABLES = {1: Table.COIL, 5: Table.COIL, 15: Table.COIL, 2: Table.DISCRETE, 4: Table.INPUT}
+_BIT_SPACE = 4096  # coils/discrete inputs 0..4095 exist; above, pymodbus answers 02 itself
+_BIT_COUNT: ContextVar[int] = ContextVar("bit_count", default=1)
+
+
+@dataclass(frozen=True, slots=True)
+class SimulatedUnit:
+    """One device on the simulated bus."""
+
+    unit: int
+    mapping: Mapping
+    options: dict[str, str] = field(default_factory=dict)
+    quirks: Quirks = field(default_factory=Quirks)
+
+
+class _CoilWord(CoilWordRequest):
+    """FC05 on the server side: the raw word goes to the hook, the reply echoes it."""
+
+    async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
+        word = self.registers[0]
+        code = await context.async_setValues(device_id, 5, self.address, [word])
+        if code:
+            return ExceptionResponse(5, code)
+        return _CoilWord(
+            dev_id=device_id,
+            transaction_id=self.transaction_id,
+            address=self.address,
+            registers=[word],
+        )
+
+
+class _ReadCoils(ReadCoilsRequest):
+    async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
+        _BIT_COUNT.set(self.count)
+        return await super().datastore_update(context, device_id)
+
+
+class _ReadDiscrete(ReadDiscreteInputsRequest):
+    async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
+        _BIT_COUNT.set(self.count)
+        return await super().datastore_update(context, device_id)
+
+
+def two_byte_count_frame(frame: bytes) -> bytes:
+    """An RTU FC03 reply as the P2 sends it with F9.05 = 0: ``00`` before the byte count."""
+    body = frame[:2] + b"\x00" + frame[2:-2]
+    return body + FramerRTU.compute_CRC(body).to_bytes(2, "big")
+
+
+class _Device:
+    """One simulated unit: its image, its rules, and the pymodbus hook that applies them."""
+
+    def __init__(self, spec: SimulatedUnit, writes: list[tuple[int, Write]]) -> None:
+        self.unit = spec.unit
+        self.mapping = spec.mapping
+        self.points = spec.mapping.points(spec.options)
+        self.image = initial_image(spec.mapping, self.points)
+        self.movers = build_movers(self.points, self.image)
+        self.quirks = spec.quirks
+        self.rules = build_rules(spec.mapping, self.points, spec.quirks)
+        self.writes = writes
+
+    def set_quirks(self, quirks: Quirks) -> None:
+        _check_quirks(quirks)
+        self.rules = build_rules(self.mapping, self.points, quirks)
+        self.quirks = quirks
+
+    def point(self, key: str) -> Point:
+        try:
+            return self.points[key]
+        except KeyError:
+            raise KeyError(f"unit {self.unit} has no entity {key!r}") from None
+
+    def sim_device(self) -> SimDevice:
+        def words() -> list[SimData]:
+            return [SimData(0, count=0x10000, values=0, datatype=DataType.REGISTERS)]
+
+        def bits() -> list[SimData]:
+            return [SimData(0, values=[False] * _BIT_SPACE, datatype=DataType.BITS)]
+
+        return SimDevice(self.unit, simdata=(bits(), bits(), words(), words()), action=self.action)
+
+    async def action(  # noqa: PLR0917 - the signature of pymodbus' SimAction
+        self,
+        function_code: int,
+        start: int,
+        address: int,
+        count: int,
+        registers: list[int],
+        values: list[int] | list[bool] | None,
+    ) -> ExcCodes | None:
+        """pymodbus' hook, called before every answer (simdevice.py:91-115)."""
+        table = _TABLES.get(function_code, Table.HOLDING)
+        if values is None and function_code in (5, 6, 15, 16):
+            self._fill(table, start, address, count, registers)  # the echo after FC06
+            return None
+        if self.quirks.latency > 0:
+            await asyncio.sleep(self.quirks.latency)
+        if values is None:
+            size = _BIT_COUNT.get() if table.is_bits else count
+            code = self._refusal(function_code) or self.rules.check_read(table, address, size)
+            if code is None:
+                self._fill(table, start, address, count, registers)
+        else:
+            write = Write(function_code, table, address, tuple(int(v) for v in values))
+            self.writes.append((self.unit, write))
+            code = self._refusal(function_code) or self.rules.check_write(write)
+            if code is None and not (table is Table.COIL and address in self.rules.commands):
+                self.image |= stored_cells(write)
+        return None if code is None else ExcCodes(code)
+
+    def _refusal(self, function_code: int) -> int | None:
+        """The exception any request gets from this unit now: its quirk, or 01."""
+        if self.quirks.exception_code is not None:
+            return self.quirks.exception_code
+        return None if function_code in self.rules.function_codes else 1
+
+    def _fill(self, table: Table, start: int, address: int, count: int, block: list[int]) -> None:
+        """Copy the image into pymodbus' block (bit tables: ``count`` 16-bit words)."""
+        if not table.is_bits:
+            for a in range(address, address + count):
+                block[a - start] = self.image.get((table, a), 0)
+            return
+        for word in range(address // 16, address // 16 + count):
+            bits = (self.image.get((table, word * 16 + b), 0) << b for b in range(16))
+            block[word - start] = sum(bits)
+
+
+def _check_quirks(quirks: Quirks) -> None:
+    if quirks.exception_code is not None and quirks.exception_code not in set(ExcCodes):
+        codes = ", ".join(str(int(code)) for code in ExcCodes)
+        raise ValueError(f"exception_code {quirks.exception_code}: pymodbus can send {codes}")
+
+
+class Simulator:
+    """Simulated units on one bus (TCP port or serial line). ``writes`` lists every write
+    request a live unit received, in order, as ``(unit, Write)``: refused ones included."""
+
+    def __init__(self, units: Sequence[SimulatedUnit], *, seed: int = 0, tick: float = 1.0) -> None:
+        self.writes: list[tuple[int, Write]] = []
+        self.ready = asyncio.Event()
+        self._devices = {spec.unit: _Device(spec, self.writes) for spec in units}
+        self._rng = random.Random(seed)  # noqa: S311 - simulated readings, not secrets
+        self._tick = tick
+        self._port: int | None = None
+        self._moving = False
+        if len(self._devices) != len(units):
+            raise ValueError("unit ids must be unique")
+        for spec in units:
+            if not 1 <= spec.unit <= 255:
+                raise ValueError(f"unit {spec.unit} is outside 1..255")
+            _check_quirks(spec.quirks)
+
+    @property
+    def port(self) -> int:
+        """The TCP port bound by ``serve_tcp`` (useful with port 0); wait for ``ready``."""
+        if self._port is None:
+            raise RuntimeError("the simulator is not serving TCP yet")
+        return self._port
+
+    # --- test and CLI access ------------------------------------------------------------
+
+    def set_quirks(self, unit: int, quirks: Quirks) -> None:
+        self._device(unit).set_quirks(quirks)
+
+    def image(self, unit: int) -> dict[Cell, int]:
+        return dict(self._device(unit).image)
+
+    def value(self, unit: int, key: str) -> Value:
+        device = self._device(unit)
+        return decode(device.point(key), device.image)
+
+    def set_value(self, unit: int, key: str, value: object) -> None:
+        """Store ``value`` as the device would report it (ValueRejectedError if it cannot)."""
+        device = self._device(unit)
+        device.image |= words_for(device.point(key), value, device.image)
+
+    def _device(self, unit: int) -> _Device:
+        try:
+            return self._devices[unit]
+        except KeyError:
+            raise KeyError(f"no simulated unit {unit}") from None
+
+    # --- serving ----------------------------------------------------------------------------
+
+    async def serve_tcp(
+        self, host: str, port: int, framer: Literal["socket", "rtu"] = "socket"
+    ) -> None:
+        """Serve Modbus TCP (``socket``) or RTU over TCP until cancelled."""
+        server = ModbusTcpServer(
+            self._sim_devices(),
+            framer=FramerType(framer),
+            address=(host, port),
+            **self._hooks(framer),
+        )
+        await self._serve(server, f"{host}:{port}")
+
+    async def serve_serial(
+        self,
+        port: str,
+        *,
+        baudrate: int = 9600,
+        parity: str = "N",
+        stopbits: int = 1,
+        bytesize: int = 8,
+        framer: Literal["rtu", "ascii"] = "rtu",
+    ) -> None:
+        """Serve a serial line (RTU or ASCII) until cancelled."""
+        server = ModbusSerialServer(
+            self._sim_devices(),
+            framer=FramerType(framer),
+            port=port,
+            baudrate=baudrate,
+            parity=parity,
+            stopbits=stopbits,
+            bytesize=bytesize,
+            **self._hooks(framer),
+        )
+        await self._serve(server, port)
+
+    def _sim_devices(self) -> list[SimDevice]:
+        return [device.sim_device() for device in self._devices.values()]
+
+    def _hooks(self, framer: str) -> dict[str, Any]:
+        def trace_pdu(sending: bool, pdu: ModbusPDU) -> ModbusPDU | None:
+            device = self._devices.get(pdu.dev_id)
+            if sending or (device is not None and not device.quirks.dead):
+                return pdu
+            return None  # dropped: transaction.py:273 keeps None, nothing is answered
+
+        def trace_packet(sending: bool, packet: bytes) -> bytes:
+            if not sending or framer != "rtu" or len(packet) < 5 or packet[1] != 3:
+                return packet
+            device = self._devices.get(packet[0])
+            if device is None or not device.quirks.two_byte_count:
+                return packet
+            return two_byte_count_frame(packet)
+
+        return {
+            "custom_pdu": [_CoilWord, _ReadCoils, _ReadDiscrete],
+            "trace_pdu": cast(Callable[[bool, ModbusPDU], ModbusPDU], trace_pdu),
+            "trace_packet": trace_packet,
+        }
+
+    async def _serve(self, server: ModbusBaseServer, where: str) -> None:
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError:
+            await server.shutdown()  # type: ignore[no-untyped-call]
+            raise OSError(f"the simulator cannot listen on {where}") from None
+        sockets = getattr(server.transport, "sockets", None) or ()
+        for sock in sockets:
+            self._port = int(sock.getsockname()[1])
+        self.ready.set()
+        try:
+            async with asyncio.TaskGroup() as group:
+                if self._tick > 0 and not self._moving:
+                    group.create_task(self._move())
+                await server.serving
+        finally:
+            self.ready.clear()
+            await server.shutdown()  # type: ignore[no-untyped-call]
+
+    async def _move(self) -> None:
+        self._moving = True
+        try:
+            while True:
+                await asyncio.sleep(self._tick)
+                for device in self._devices.values():
+                    device.image |= advance(device.movers, device.image, self._rng)
+        finally:
+            self._moving = False
