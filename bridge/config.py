@@ -238,6 +238,11 @@ def load_config(path: Path) -> LoadedConfig:
         raise ConfigError(str(path), [f"cannot read: {exc.strerror}"]) from None
     except ValueError as exc:
         raise ConfigError(str(path), [str(exc)]) from None
+    return load_config_data(data, path)
+
+
+def load_config_data(data: object, path: Path) -> LoadedConfig:
+    """Validate parsed config data; mapping paths are relative to ``path``'s folder."""
     if not isinstance(data, dict):
         raise ConfigError(str(path), ["the file must hold a mapping with mqtt, buses, devices"])
     try:

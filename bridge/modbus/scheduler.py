@@ -145,28 +145,30 @@ class BusScheduler:
         return start if last is None else max(start, last + interval)
 
     async def _serve(self, job: _Job) -> None:
-        """Run one job; resend after a timeout or a transmission error while retries last."""
-        for attempt in range(job.retries + 1):
-            if job.future.done():  # the submitter gave up (cancelled)
-                return
-            try:
-                await self._ensure_open()
-                values = await self._transaction(job)
-            except DeviceExceptionError as raw:
-                meaning = exception_meaning(raw.code, job.protocol)
-                error: Exception = DeviceExceptionError(raw.code, meaning.name, meaning.action)
-                resend = meaning.action == "retry"
-            except DeviceTimeoutError as timeout:
-                error, resend = timeout, True
-            except (BusError, FrameError) as failure:
-                error, resend = failure, False
-            else:
-                if not job.future.done():
-                    job.future.set_result(values)
-                return
-            if not resend or attempt == job.retries:
-                _settle(job, error)
-                return
+        """Run one job; a timeout or a transmission error sends it back to the queue while
+        retries last, so a resend keeps the gap and the unit's pacing like any frame."""
+        if job.future.done():  # the submitter gave up (cancelled)
+            return
+        try:
+            await self._ensure_open()
+            values = await self._transaction(job)
+        except DeviceExceptionError as raw:
+            meaning = exception_meaning(raw.code, job.protocol)
+            error: Exception = DeviceExceptionError(raw.code, meaning.name, meaning.action)
+            resend = meaning.action == "retry"
+        except DeviceTimeoutError as timeout:
+            error, resend = timeout, True
+        except (BusError, FrameError) as failure:
+            error, resend = failure, False
+        else:
+            if not job.future.done():
+                job.future.set_result(values)
+            return
+        if resend and job.retries > 0:
+            job.retries -= 1
+            self._queue.append(job)
+            return
+        _settle(job, error)
 
     async def _transaction(self, job: _Job) -> tuple[int, ...]:
         started = time.monotonic()

@@ -1,0 +1,87 @@
+"""The Modbus side of the bridge: one scheduler per bus, one poller per device, one TaskGroup.
+
+``Engine(loaded_config, on_update).run()`` polls every enabled device until cancelled;
+``engine.write(device_id, key, value)`` and ``engine.read_now(device_id, keys)`` are what
+the MQTT side calls for commands. Buses are independent: a dead port or a dead unit on
+one bus never touches another bus.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Iterable
+
+from bridge.config import LoadedConfig, SerialBus, TcpBus
+from bridge.core.codec import Value
+from bridge.core.health import HealthPolicy
+from bridge.core.timing import LinkTiming
+from bridge.errors import ValueRejectedError
+from bridge.modbus.poller import DEFAULT_POLICY, DevicePoller, DeviceUpdate
+from bridge.modbus.scheduler import BusScheduler
+from bridge.modbus.transport import Transport
+
+
+def link_timing(bus: SerialBus | TcpBus) -> LinkTiming:
+    """The wire-time model of a bus (serial framing, or TCP)."""
+    if isinstance(bus, SerialBus):
+        timing = LinkTiming.for_serial(bus.baudrate, bus.parity, bus.stopbits, bus.bytesize)
+        return (
+            timing
+            if bus.transport == "rtu"
+            else LinkTiming(
+                mode="ascii", baudrate=timing.baudrate, bits_per_char=timing.bits_per_char
+            )
+        )
+    return LinkTiming(mode="tcp")
+
+
+class Engine:
+    """All buses and devices of one config."""
+
+    def __init__(
+        self,
+        loaded: LoadedConfig,
+        on_update: Callable[[DeviceUpdate], None] | None = None,
+        policy: HealthPolicy = DEFAULT_POLICY,
+    ) -> None:
+        config = loaded.config
+        self.schedulers: dict[str, BusScheduler] = {}
+        self.devices: dict[str, DevicePoller] = {}
+        for bus in config.buses:
+            timing = link_timing(bus)
+            gap = timing.silence if isinstance(bus, SerialBus) else 0.0
+            self.schedulers[bus.id] = BusScheduler(Transport(bus), gap)
+        buses = {bus.id: bus for bus in config.buses}
+        for device in config.devices:
+            if not device.enabled:
+                continue
+            bus = buses[device.bus]
+            self.devices[device.id] = DevicePoller(
+                device,
+                loaded.mappings[device.id],
+                self.schedulers[bus.id],
+                timing=link_timing(bus),
+                timeout=bus.timeout,
+                retries=bus.retries,
+                on_update=on_update,
+                policy=policy,
+            )
+
+    async def run(self) -> None:
+        """Run every scheduler and poller until cancelled."""
+        async with asyncio.TaskGroup() as group:
+            for bus_id, scheduler in self.schedulers.items():
+                group.create_task(scheduler.run(), name=f"bus:{bus_id}")
+            for device_id, poller in self.devices.items():
+                group.create_task(poller.run(), name=f"device:{device_id}")
+
+    def device(self, device_id: str) -> DevicePoller:
+        if device_id not in self.devices:
+            raise ValueRejectedError(f"no device {device_id!r}")
+        return self.devices[device_id]
+
+    async def write(self, device_id: str, key: str, value: object) -> Value:
+        return await self.device(device_id).write(key, value)
+
+    async def read_now(self, device_id: str, keys: Iterable[str] | None = None) -> dict[str, Value]:
+        return await self.device(device_id).read_now(keys)
