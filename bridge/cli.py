@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
-from bridge import __version__
+from bridge import __version__, simulate_cli
 from bridge.config import config_schema, load_config
 from bridge.core.address import format_address
 from bridge.core.entity import Entity
@@ -27,6 +27,7 @@ from bridge.errors import InputError
 
 EXIT_OK = 0
 EXIT_INVALID = 2
+EXIT_FAILED = 1
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -38,6 +39,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
+    except OSError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -73,6 +77,7 @@ def _parser() -> argparse.ArgumentParser:
     validate = actions.add_parser("validate", help="validate mapping files")
     validate.add_argument("files", nargs="+", type=Path, metavar="FILE")
     validate.set_defaults(handler=_validate)
+    simulate_cli.add_parser(commands)
     return parser
 
 

@@ -1,0 +1,176 @@
+"""``modbus-mqtt-bridge simulate``: serve simulated devices built from mappings.
+
+    modbus-mqtt-bridge simulate --mapping nastec_vasco --unit 1 \
+        --mapping soft_starter --unit 2 --tcp 127.0.0.1:5020
+    modbus-mqtt-bridge simulate --mapping p2_vfd --unit 1 --pty --framer ascii
+
+``--pty`` creates a virtual serial cable and prints the port the bridge should open.
+Quirks (``--latency``, ``--dead``, ``--max-read``...) reproduce real devices' behaviour.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+from collections.abc import Coroutine
+from typing import Any, TextIO
+
+from bridge.core.mapping import load_mapping, resolve_mapping_path
+from bridge.errors import InputError
+from bridge.modbus.null_modem import null_modem
+from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
+
+
+def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    sim = commands.add_parser("simulate", help="serve simulated devices built from mappings")
+    sim.add_argument(
+        "--mapping",
+        action="append",
+        required=True,
+        metavar="NAME",
+        help="shipped mapping name or YAML path (repeat with --unit)",
+    )
+    sim.add_argument(
+        "--unit",
+        action="append",
+        required=True,
+        type=int,
+        metavar="N",
+        help="unit id of the preceding --mapping",
+    )
+    sim.add_argument(
+        "-o",
+        "--option",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a mapping option for every unit that has it",
+    )
+    where = sim.add_mutually_exclusive_group(required=True)
+    where.add_argument("--tcp", metavar="HOST:PORT", help="serve Modbus TCP (or RTU over TCP)")
+    where.add_argument("--serial", metavar="PORT", help="serve a serial port")
+    where.add_argument("--pty", action="store_true", help="create a virtual serial cable")
+    sim.add_argument(
+        "--framer", choices=("socket", "rtu", "ascii"), help="default: socket on TCP, rtu on serial"
+    )
+    sim.add_argument("--baudrate", type=int, default=9600)
+    sim.add_argument("--parity", choices=("N", "E", "O"), default="N")
+    sim.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    sim.add_argument("--tick", type=float, default=1.0, help="seconds between value changes")
+    sim.add_argument("--seed", type=int, default=0)
+    quirks = sim.add_argument_group("device quirks (every unit)")
+    quirks.add_argument("--latency", type=float, default=0.0, help="seconds before each answer")
+    quirks.add_argument(
+        "--dead",
+        action="append",
+        type=int,
+        default=[],
+        metavar="UNIT",
+        help="this unit never answers",
+    )
+    quirks.add_argument("--max-read", type=int, metavar="N", help="refuse longer reads")
+    quirks.add_argument(
+        "--refuse-gaps",
+        action="store_true",
+        help="refuse reads of addresses the mapping does not define",
+    )
+    quirks.add_argument(
+        "--coil-on-value",
+        type=lambda text: int(text, 0),
+        metavar="WORD",
+        help="FC05 ON word the device accepts (0xFF00 or 0x00FF)",
+    )
+    quirks.add_argument(
+        "--exception",
+        type=int,
+        metavar="CODE",
+        help="answer every request with this exception code",
+    )
+    quirks.add_argument(
+        "--two-byte-count",
+        action="store_true",
+        help="FC03 replies with a 2-byte byte count (P2 with F9.05 = 0)",
+    )
+    sim.set_defaults(handler=run_simulate)
+
+
+def build_simulator(args: argparse.Namespace) -> Simulator:
+    """The simulator the arguments describe; InputError naming the bad argument."""
+    if len(args.mapping) != len(args.unit):
+        raise InputError("simulate", ["give one --unit after each --mapping"])
+    options = dict(pair.partition("=")[::2] for pair in args.option)
+    units = []
+    for ref, unit in zip(args.mapping, args.unit, strict=True):
+        mapping = load_mapping(resolve_mapping_path(ref))
+        mine = {k: v for k, v in options.items() if k in mapping.options}
+        quirks = Quirks(
+            max_read_registers=args.max_read,
+            refuse_gaps=True if args.refuse_gaps else None,
+            coil_on_value=args.coil_on_value,
+            exception_code=args.exception,
+            latency=args.latency,
+            dead=unit in args.dead,
+            two_byte_count=args.two_byte_count,
+        )
+        units.append(SimulatedUnit(unit, mapping, mine, quirks))
+    try:
+        return Simulator(units, seed=args.seed, tick=args.tick)
+    except ValueError as exc:
+        raise InputError("simulate", [str(exc)]) from None
+
+
+def run_simulate(args: argparse.Namespace, out: TextIO) -> int:
+    simulator = build_simulator(args)
+    asyncio.run(until_stopped(_serve(simulator, args, out)))
+    return 0
+
+
+async def until_stopped(work: Coroutine[Any, Any, None]) -> None:
+    """Run ``work`` until it ends or SIGINT/SIGTERM arrives (Ctrl-C, ``docker stop``)."""
+    task = asyncio.ensure_future(work)
+    loop = asyncio.get_running_loop()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(signum, task.cancel)
+    try:
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    finally:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(signum)
+
+
+async def _serve(simulator: Simulator, args: argparse.Namespace, out: TextIO) -> None:
+    units = ", ".join(f"{m} unit {u}" for m, u in zip(args.mapping, args.unit, strict=True))
+    if args.tcp:
+        host, _, port = args.tcp.rpartition(":")
+        task = asyncio.create_task(
+            simulator.serve_tcp(host or "127.0.0.1", int(port), args.framer or "socket")
+        )
+        await _announce(simulator, task, f"serving {units} on tcp {host}:{port}", out)
+        return
+    line = {
+        "baudrate": args.baudrate,
+        "parity": args.parity,
+        "stopbits": args.stopbits,
+        "framer": args.framer or "rtu",
+    }
+    if args.serial:
+        task = asyncio.create_task(simulator.serve_serial(args.serial, **line))
+        await _announce(simulator, task, f"serving {units} on {args.serial}", out)
+        return
+    with null_modem() as (device_end, bridge_end):
+        task = asyncio.create_task(simulator.serve_serial(device_end, **line))
+        await _announce(simulator, task, f"serving {units}; open {bridge_end} from the bridge", out)
+
+
+async def _announce(simulator: Simulator, task: asyncio.Task[None], text: str, out: TextIO) -> None:
+    ready = asyncio.create_task(simulator.ready.wait())
+    await asyncio.wait({task, ready}, return_when=asyncio.FIRST_COMPLETED)
+    if task.done():
+        ready.cancel()
+        task.result()  # raises the reason it could not serve
+        return
+    print(text, file=out, flush=True)
+    await task

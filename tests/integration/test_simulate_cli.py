@@ -1,0 +1,87 @@
+"""``modbus-mqtt-bridge simulate`` as a user runs it: serves, answers, stops cleanly."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import socket
+import subprocess
+import sys
+
+import pytest
+
+from bridge.config import TcpBus
+from bridge.core.entity import Table
+from bridge.core.request import Read
+from bridge.modbus.transport import Transport
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+async def test_simulate_serves_two_units_and_stops_cleanly(stop: signal.Signals) -> None:
+    port = free_port()
+    command = [
+        sys.executable,
+        "-m",
+        "bridge.cli",
+        "simulate",
+        "--mapping",
+        "soft_starter",
+        "--unit",
+        "1",
+        "--mapping",
+        "nastec_vasco",
+        "--unit",
+        "2",
+        "--tcp",
+        f"127.0.0.1:{port}",
+        "--tick",
+        "0",
+        "--dead",
+        "3",
+    ]
+    with subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    ) as process:
+        try:
+            assert process.stdout is not None
+            line = await asyncio.wait_for(asyncio.to_thread(process.stdout.readline), 20)
+            assert line.startswith("serving soft_starter unit 1, nastec_vasco unit 2 on tcp")
+            transport = Transport(TcpBus(id="t", transport="tcp", host="127.0.0.1", tcp_port=port))
+            await transport.open()
+            assert await transport.execute(2, Read(Table.HOLDING, 0x97, 1), 1.0) == (100,)
+            assert await transport.execute(1, Read(Table.HOLDING, 0x1036, 1), 1.0) == (0,)
+            transport.close()
+            process.send_signal(stop)
+            assert await asyncio.wait_for(asyncio.to_thread(process.wait), 10) == 0
+        finally:
+            if process.poll() is None:
+                process.kill()
+
+
+def test_simulate_refuses_an_unknown_mapping() -> None:
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bridge.cli",
+            "simulate",
+            "--mapping",
+            "nope",
+            "--unit",
+            "1",
+            "--pty",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+    assert result.returncode == 2
+    assert "no shipped mapping of that name" in result.stderr
