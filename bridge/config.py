@@ -116,7 +116,9 @@ class MqttConfig(_Strict):
 class _BusBase(_Strict):
     id: str
     timeout: Duration = Field(1.0, description="seconds to wait for a reply")
-    retries: int = Field(1, ge=0, le=5, description="resends after a timeout")
+    retries: int = Field(
+        1, ge=0, le=5, description="resends of a write after a timeout (reads: next poll)"
+    )
 
     @field_validator("id")
     @classmethod

@@ -127,8 +127,9 @@ class DevicePoller:
                 await self.poll(due)
                 after = time.monotonic()
                 for poll_class in due:
-                    interval = self.intervals.get(poll_class)
-                    next_due[poll_class] = after + interval if interval else float("inf")
+                    next_due[poll_class] = _next_tick(
+                        next_due[poll_class], self.intervals.get(poll_class), after
+                    )
                 if PollClass.ONCE in due and not self._polled_once:
                     next_due[PollClass.ONCE] = after + self.device.poll.slow  # until it succeeds
             wake = min(*next_due.values(), self._offline_wake())
@@ -142,8 +143,11 @@ class DevicePoller:
         chosen = set(classes)
         fresh: set[Address] = set()
         for read in self._plan(chosen):
-            if not await self._read(read, Priority.POLL, fresh) and self.health.online is False:
-                break
+            timeouts = self.health.timeouts
+            if not await self._read(read, Priority.POLL, fresh) and (
+                self.health.timeouts > timeouts or self.health.online is False
+            ):
+                break  # a unit that stopped answering: the next cycle tries again
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
         keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
@@ -245,8 +249,8 @@ class DevicePoller:
     async def _submit(
         self, request: Read | Write, priority: Priority, retries: int | None = None
     ) -> tuple[int, ...]:
-        if retries is None:  # a probe of an offline device costs one timeout, no more
-            retries = 0 if self.health.online is False else self.retries
+        if retries is None:  # reads are not resent: the next cycle reads again
+            retries = 0
         started = time.monotonic()
         try:
             values = await self.scheduler.submit(
@@ -412,6 +416,14 @@ def _dependencies(point: Point) -> list[Read]:
     if entity.field_width is not None or (entity.eeprom and entity.readable):
         reads.append(Read(point.table, point.address, point.count))
     return list(dict.fromkeys(reads))
+
+
+def _next_tick(due: float, interval: float | None, now: float) -> float:
+    """The next tick of a fixed schedule after ``now``; ticks missed meanwhile are skipped."""
+    if not interval:
+        return float("inf")
+    missed = max(0, int((now - due) // interval))
+    return due + (missed + 1) * interval
 
 
 def _as_value(value: object) -> Value:

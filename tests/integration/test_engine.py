@@ -280,3 +280,25 @@ async def test_keepalive_shortens_the_poll_interval() -> None:
     async with serving_tcp(sim) as port:
         engine = Engine(config([tcp_bus(port)], [device("soft_starter", poll={"fast": 120})]))
         assert engine.devices["soft_starter_1"].intervals[PollClass.FAST] == 20.0
+
+
+@pytest.mark.asyncio
+async def test_a_missing_serial_port_does_not_touch_another_bus() -> None:
+    sim = simulator((1, "vacon_nx"))
+    recorder = Recorder()
+    async with serving_tcp(sim) as port:
+        unplugged = {"id": "usb", "transport": "rtu", "port": "/dev/ttyUSB-unplugged"}
+        poll = {"poll": {"fast": 0.1, "slow": 1}}
+        loaded = config(
+            [tcp_bus(port), unplugged],
+            [device("vacon_nx", **poll), device("soft_starter", 2, bus="usb", **poll)],
+        )
+        engine = Engine(loaded, recorder, policy=FAST_POLICY)
+        async with running(engine):
+            drive, starter = engine.devices["vacon_nx_1"], engine.devices["soft_starter_2"]
+            await eventually(lambda: starter.health.online is False)
+            start = drive.health.requests
+            await eventually(lambda: drive.health.requests > start + 10)
+            assert drive.health.online is True
+            assert drive.health.errors == 0
+            assert engine.schedulers["usb"].counters.reopenings >= 1
