@@ -302,3 +302,20 @@ async def test_a_missing_serial_port_does_not_touch_another_bus() -> None:
             assert drive.health.online is True
             assert drive.health.errors == 0
             assert engine.schedulers["usb"].counters.reopenings >= 1
+
+
+@pytest.mark.asyncio
+async def test_rtu_over_tcp_through_a_serial_gateway() -> None:
+    sim = simulator((5, "smartgen_hgm6100"), (6, "vacon_nx"))
+    async with serving_tcp(sim, framer="rtu") as port:
+        bus = tcp_bus(port, transport="rtu-over-tcp")
+        pacing = {"protocol": {"min_request_interval": 0.01}}
+        engine = Engine(
+            config([bus], [device("smartgen_hgm6100", 5, **pacing), device("vacon_nx", 6)])
+        )
+        async with running(engine, pollers=False):
+            for device_id, unit in (("smartgen_hgm6100_5", 5), ("vacon_nx_6", 6)):
+                await engine.devices[device_id].poll(ALL)
+                assert_same_values(engine, device_id, unit, sim)
+            assert await engine.write("smartgen_hgm6100_5", "command_stop", "PRESS") is None
+            assert sim.writes[-1] == (5, Write(5, Table.COIL, 1, (0x00FF,)))
