@@ -44,8 +44,8 @@ from bridge.core.planner import (
     one_read_per_entity,
     plan_reads,
     split_read,
-    unread,
 )
+from bridge.core.refusal import refusal_search, run_search
 from bridge.core.request import Read
 from bridge.core.timing import LinkTiming
 
@@ -176,27 +176,16 @@ def refusals(plan: Sequence[Read], points: Sequence[Point]) -> set[Address]:
 def learn(
     plan: Sequence[Read], points: Sequence[Point], device_refuses: set[Address], *, halves: bool
 ) -> tuple[frozenset[Address], int]:
-    """The engine (planner docstring) meeting the refusals, by bisection (``halves``) or atom
-    by atom: what it remembers, and the extra reads it spent finding out."""
+    """The engine's search (bridge/core/refusal.py) meeting the refusals, by bisection
+    (``halves``) or atom by atom: what it remembers, and the extra reads it spent."""
     learnt: set[Address] = set()
     spent = 0
-
-    def locate(block: Read) -> None:
-        nonlocal spent
-        parts = split_read(block, points, halves=halves)
-        spent += len(parts)
-        if not parts:
-            learnt.update(addresses_of(block))
-            return
-        refused = [part for part in parts if addresses_of(part) & device_refuses]
-        for part in refused:
-            locate(part)
-        if not refused:
-            learnt.update(unread(block, parts))
-
     for block in plan:
         if addresses_of(block) & device_refuses:
-            locate(block)
+            search = refusal_search(block, points, halves=halves)
+            found = run_search(search, lambda part: not addresses_of(part) & device_refuses)
+            learnt |= found.refused
+            spent += found.reads
     return frozenset(learnt), spent
 
 

@@ -23,15 +23,9 @@ from bridge.core.codec import Value, decode, encode
 from bridge.core.entity import PollClass, Table
 from bridge.core.health import DeviceHealth, HealthPolicy, Outcome, Transition
 from bridge.core.mapping import Mapping, Point
-from bridge.core.planner import (
-    ReadLimits,
-    addresses_of,
-    holes,
-    limits_for,
-    plan_reads,
-    split_read,
-)
+from bridge.core.planner import ReadLimits, limits_for, plan_reads
 from bridge.core.protocol import Protocol
+from bridge.core.refusal import Refusal, refusal_search
 from bridge.core.request import Read, Write
 from bridge.core.timing import LinkTiming
 from bridge.errors import (
@@ -197,48 +191,53 @@ class DevicePoller:
             return False
         except ModbusError:
             return False
-        for address, value in zip(read.span, values, strict=True):
-            self.image[(read.table, address)] = value
-            fresh.add((read.table, address))
+        self._keep(read, values, fresh)
         return True
 
     async def _learn_refusal(
         self, read: Read, priority: Priority, fresh: set[Address], exc: DeviceExceptionError
     ) -> bool:
-        """Find out what the device refused in ``read`` and remember it for later plans.
-
-        A block spanning holes is read atom by atom: if the atoms answer, the holes were
-        refused. A block without holes is halved: if both halves answer, the device allows
-        fewer registers per read than the mapping says. A single register refused is
-        remembered as unreadable.
-        """
-        points = list(self.points.values())
-        gaps = holes(read, points)
-        parts = split_read(read, points, halves=not gaps)
-        if not parts and read.count > 1:  # one value longer than the device allows per read
-            half = read.count // 2
-            parts = (
-                Read(read.table, read.address, half),
-                Read(read.table, read.address + half, read.count - half),
+        """Bisect a refused block with real reads; remember what the device refused (or the
+        smaller read limit it showed) so later plans avoid it. True if any part answered."""
+        search = refusal_search(read, list(self.points.values()))
+        answered = False
+        try:
+            part = next(search)
+            while True:
+                ok = await self._probe(part, priority, fresh)
+                answered = answered or ok
+                part = search.send(ok)
+        except StopIteration as done:
+            refusal: Refusal = done.value
+        except ModbusError:
+            return answered  # the device stopped answering meanwhile: learn next time
+        self._remember(refusal.refused, exc)
+        if refusal.max_count is not None:
+            self.max_read = min(self.max_read or refusal.max_count, refusal.max_count)
+            log.warning(
+                "%s: at most %d registers per read; plans adjusted", self.device.id, self.max_read
             )
-        if not parts:
-            self._remember(addresses_of(read), exc)
-            return False
-        results = [await self._read(part, priority, fresh) for part in parts]
-        if all(results):
-            if gaps:
-                self._remember(gaps, exc)
-            else:
-                self.max_read = min(self.max_read or read.count, max(p.count for p in parts))
-                log.warning(
-                    "%s: at most %d registers per read; plans adjusted",
-                    self.device.id,
-                    self.max_read,
-                )
-                self._forget_plans()
-        return any(results)
+            self._forget_plans()
+        return answered
+
+    async def _probe(self, read: Read, priority: Priority, fresh: set[Address]) -> bool:
+        """One read of a bisection: True answered (values kept), False refused."""
+        try:
+            values = await self._submit(read, priority)
+        except DeviceExceptionError as exc:
+            if exc.action == "refused":
+                return False
+            raise
+        self._keep(read, values, fresh)
+        return True
+
+    def _keep(self, read: Read, values: tuple[int, ...], fresh: set[Address]) -> None:
+        for address, value in zip(read.span, values, strict=True):
+            self.image[(read.table, address)] = value
+            fresh.add((read.table, address))
 
     def _remember(self, addresses: frozenset[Address], exc: DeviceExceptionError) -> None:
+        """Never read these addresses again (logged once, with the device's reason)."""
         newly = addresses - self.refused
         if newly:
             shown = ", ".join(f"{t.value} {a}" for t, a in sorted(newly))

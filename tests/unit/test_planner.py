@@ -34,6 +34,7 @@ from bridge.core.planner import (
     split_read,
     unread,
 )
+from bridge.core.refusal import refusal_search, run_search
 from bridge.core.request import Read, Write
 from bridge.core.timing import LinkTiming
 
@@ -794,27 +795,16 @@ Learnt = frozenset[tuple[Table, int]]
 def _learn(
     points: list[Point], mapping: Mapping, device_refuses: set[tuple[Table, int]]
 ) -> tuple[Learnt, int]:
-    """The engine's bisection (planner docstring) against a device refusing some addresses:
-    what it remembers and how many extra reads it spent."""
+    """The engine's search (bridge/core/refusal.py) against a device refusing some
+    addresses: what it remembers and how many extra reads it spent."""
     learnt: set[tuple[Table, int]] = set()
     spent = 0
-
-    def locate(block: Read) -> None:
-        nonlocal spent
-        parts = split_read(block, points, halves=True)
-        spent += len(parts)
-        if not parts:
-            learnt.update(addresses_of(block))
-            return
-        refused = [part for part in parts if addresses_of(part) & device_refuses]
-        for part in refused:
-            locate(part)
-        if not refused:
-            learnt.update(unread(block, parts))
-
     for block in plan_reads(points, limits_for(mapping)).reads:
         if addresses_of(block) & device_refuses:
-            locate(block)
+            search = refusal_search(block, points)
+            found = run_search(search, lambda part: not addresses_of(part) & device_refuses)
+            learnt |= found.refused
+            spent += found.reads
     return frozenset(learnt), spent
 
 
