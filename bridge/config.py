@@ -214,6 +214,8 @@ class Config(_Strict):
 def _check_identifier(value: str) -> str:
     if not _ID.match(value):
         raise ValueError("ids are lowercase letters, digits, '_' and '-' (used in MQTT topics)")
+    if value == "bridge":
+        raise ValueError("'bridge' is reserved for <base>/bridge/... topics")
     return value
 
 

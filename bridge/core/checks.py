@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from bridge.core.mapping import Mapping
 
 KEY_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
+RESERVED_KEYS = frozenset({"status", "alarms", "availability", "set", "get", "error"})
 _MAX_VARIANTS = 256
 _UNSIGNED_MAX = {DataType.U32: 0xFFFFFFFF, DataType.S32: 0xFFFFFFFF, DataType.F32: 0xFFFFFFFF}
 
@@ -73,6 +74,8 @@ def _keys(mapping: Mapping) -> Iterator[str]:
     for key in mapping.entities:
         if not KEY_PATTERN.match(key):
             yield f"entities.{key}: keys are snake_case (a-z, 0-9, _), starting with a letter"
+        elif key in RESERVED_KEYS and key != mapping.status:
+            yield f"entities.{key}: '{key}' is reserved in the state JSON (status, alarms)"
 
 
 def _addresses(mapping: Mapping) -> Iterator[str]:

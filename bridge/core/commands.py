@@ -1,0 +1,110 @@
+"""Command payloads: parsing, expiry and duplicate detection. Pure (time is passed in).
+
+``<base>/<device>/set`` takes a JSON object ``{key: value, ...}``; ``<base>/<device>/<key>/set``
+takes a plain value: a number, ``true``/``false``, ``ON``/``OFF``, an enum label, ``PRESS``,
+or a JSON value. ``<base>/<device>/get`` takes nothing (read everything) or a JSON object
+or list naming the keys. What the value means for the entity (type, range, enum label)
+is checked by the codec when the command is encoded; here only the payload's shape is.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+from dataclasses import dataclass
+
+from bridge.errors import ValueRejectedError
+
+MAX_PAYLOAD = 4096
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """One write asked for over MQTT, with the time it stops being worth executing."""
+
+    device_id: str
+    key: str
+    value: object
+    received: float
+    expires: float
+
+    def expired(self, now: float) -> bool:
+        return now > self.expires
+
+
+def parse_set(payload: bytes, key: str | None) -> dict[str, object]:
+    """``{key: value}`` from a /set payload; ValueRejectedError naming what is wrong."""
+    text = _text(payload)
+    if key is not None:
+        return {key: _plain(text)}
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError:
+        raise ValueRejectedError("a device /set payload is a JSON object {key: value}") from None
+    if not isinstance(data, dict) or not data:
+        raise ValueRejectedError("a device /set payload is a non-empty JSON object {key: value}")
+    return dict(data)
+
+
+def parse_get(payload: bytes) -> list[str] | None:
+    """The keys a /get asks for, or None for every value."""
+    text = _text(payload).strip()
+    if not text:
+        return None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError:
+        raise ValueRejectedError('a /get payload is empty, {"key": ""} or ["key", ...]') from None
+    keys = list(data) if isinstance(data, dict | list) else None
+    if not keys or not all(isinstance(k, str) for k in keys):
+        raise ValueRejectedError('a /get payload is empty, {"key": ""} or ["key", ...]')
+    return keys
+
+
+def _text(payload: bytes) -> str:
+    if len(payload) > MAX_PAYLOAD:
+        raise ValueRejectedError(f"payload longer than {MAX_PAYLOAD} bytes")
+    try:
+        return payload.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueRejectedError("payload is not UTF-8 text") from None
+
+
+def _plain(text: str) -> object:
+    """A plain value: JSON scalars as such (``45``, ``4.5``, ``true``, ``"x"``), else text."""
+    stripped = text.strip()
+    if not stripped:
+        raise ValueRejectedError("empty payload")
+    try:
+        value = json.loads(stripped)
+    except json.JSONDecodeError:
+        return stripped
+    if isinstance(value, dict | list):
+        raise ValueRejectedError("a /<key>/set payload is one plain value, not an object")
+    return value
+
+
+class RecentMessages:
+    """Remembers recent command messages so a redelivered duplicate (QoS 1/2 with the DUP
+    flag, same packet id, topic and payload) is not executed twice."""
+
+    def __init__(self, window: float, size: int = 1024) -> None:
+        self.window = window
+        self.size = size
+        self._seen: OrderedDict[tuple[str, bytes, int], float] = OrderedDict()
+
+    def is_duplicate(
+        self, topic: str, payload: bytes, mid: int | None, duplicate: bool, now: float
+    ) -> bool:
+        """Record a message; True when it repeats one seen within the window."""
+        while self._seen and (
+            next(iter(self._seen.values())) < now - self.window or len(self._seen) > self.size
+        ):
+            self._seen.popitem(last=False)
+        if mid is None or mid == 0:
+            return False
+        signature = (topic, payload, mid)
+        if duplicate and signature in self._seen:
+            return True
+        self._seen[signature] = now
+        return False

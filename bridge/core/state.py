@@ -1,0 +1,58 @@
+"""The state a device publishes: its JSON document, plain values, status and alarms. Pure.
+
+``<base>/<device>`` carries every published value by key (numbers as numbers, enums as
+labels, unknown as null), plus ``status`` (the value of the mapping's status entity) and
+``alarms`` (the names of the active alarms: the key of each alarm bit that is on, the
+label of each fault code that is not normal). Secret and write-only entities are never
+in it. ``<base>/<device>/<key>`` carries the plain value: JSON for numbers, booleans and
+null (``23.5``, ``true``, ``null``), the bare text for labels and text.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping as AnyMapping
+from typing import Any
+
+from bridge.core.codec import Value
+from bridge.core.mapping import Mapping, Point
+
+
+def published(points: AnyMapping[str, Point]) -> list[str]:
+    """Keys whose values go to MQTT: readable and not secret."""
+    return [k for k, p in points.items() if p.entity.readable and not p.entity.secret]
+
+
+def active_alarms(points: AnyMapping[str, Point], values: AnyMapping[str, Value]) -> list[str]:
+    """Names of the alarms active in ``values``, in mapping order."""
+    names: list[str] = []
+    for key, point in points.items():
+        entity = point.entity
+        if not entity.alarm or key not in values:
+            continue
+        value = values[key]
+        if entity.kind == "bool" and value is True:
+            names.append(key)
+        elif entity.enum is not None and isinstance(value, str):
+            normal = {entity.enum.get(raw) for raw in entity.normal}
+            if value not in normal:
+                names.append(value)
+    return names
+
+
+def state_document(
+    mapping: Mapping, points: AnyMapping[str, Point], values: AnyMapping[str, Value]
+) -> dict[str, Any]:
+    """The JSON object published on ``<base>/<device>``."""
+    document: dict[str, Any] = {key: values.get(key) for key in published(points)}
+    if mapping.status is not None and mapping.status in points:
+        document["status"] = values.get(mapping.status)
+    document["alarms"] = active_alarms(points, values)
+    return document
+
+
+def plain_payload(value: Value) -> str:
+    """The payload of ``<base>/<device>/<key>``."""
+    if isinstance(value, str):
+        return value
+    return json.dumps(value)
