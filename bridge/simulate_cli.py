@@ -12,13 +12,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
-import signal
-from collections.abc import Coroutine
-from typing import Any, TextIO
+from typing import TextIO
 
 from bridge.core.mapping import load_mapping, resolve_mapping_path
 from bridge.errors import InputError
+from bridge.lifecycle import until_stopped
 from bridge.modbus.null_modem import null_modem
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 
@@ -125,20 +123,6 @@ def run_simulate(args: argparse.Namespace, out: TextIO) -> int:
     simulator = build_simulator(args)
     asyncio.run(until_stopped(_serve(simulator, args, out)))
     return 0
-
-
-async def until_stopped(work: Coroutine[Any, Any, None]) -> None:
-    """Run ``work`` until it ends or SIGINT/SIGTERM arrives (Ctrl-C, ``docker stop``)."""
-    task = asyncio.ensure_future(work)
-    loop = asyncio.get_running_loop()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(signum, task.cancel)
-    try:
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-    finally:
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            loop.remove_signal_handler(signum)
 
 
 async def _serve(simulator: Simulator, args: argparse.Namespace, out: TextIO) -> None:
