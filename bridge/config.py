@@ -87,6 +87,12 @@ class MqttConfig(_Strict):
         return topic
 
     @model_validator(mode="after")
+    def _tls_needs_mqtts(self) -> Self:
+        if self.tls is not None and urlsplit(self.url).scheme != "mqtts":
+            raise ValueError("tls: settings apply to mqtts:// URLs; use mqtts://host[:port]")
+        return self
+
+    @model_validator(mode="after")
     def _one_password_source(self) -> Self:
         given = [self.password, self.password_file, self.password_env]
         if sum(value is not None for value in given) > 1:

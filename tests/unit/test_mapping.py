@@ -325,7 +325,7 @@ def test_overlaps_that_make_sense() -> None:
     options = {"m": {"description": "m", "choices": ["a", "b"], "default": "a"}}
     make_mapping(
         {
-            "status": {"name": "S", "address": 1, "bit": 0, "width": 4, "enum": {0: "off"}},
+            "state": {"name": "S", "address": 1, "bit": 0, "width": 4, "enum": {0: "off"}},
             "combo": {"name": "C", "address": 1, "bit": 7},
             "word": {"name": "W", "address": 1, "ha": {"entity_category": "diagnostic"}},
             "limit": {"name": "L", "address": 2, "access": "rw"},

@@ -1,0 +1,14 @@
+"""The MQTT edge: one broker session (``MqttClient``) and the reconnect loop around it."""
+
+from bridge.mqtt.client import Message, MqttClient, run_with_reconnect
+from bridge.mqtt.errors import MqttConnectError, MqttDisconnectedError, MqttError, MqttRefusedError
+
+__all__ = [
+    "Message",
+    "MqttClient",
+    "MqttConnectError",
+    "MqttDisconnectedError",
+    "MqttError",
+    "MqttRefusedError",
+    "run_with_reconnect",
+]

@@ -1,0 +1,362 @@
+"""The MQTT edge: the only module that imports aiomqtt (and through it paho-mqtt).
+
+``MqttClient`` is one broker session as an async context manager: entering connects
+(mqtt:// or mqtts://, user name and password, MQTT 5 with a fallback to 3.1.1 when the
+broker refuses 5), sets the Last Will ``offline`` (retained, QoS 1) on the will topic and
+publishes ``online`` there; leaving publishes ``offline`` and disconnects cleanly. Incoming
+messages are ``Message`` values, decoupled from paho. The caller owns the reconnect loop;
+``run_with_reconnect`` is that loop, with a capped exponential backoff.
+
+aiomqtt 2.5 drops paho's DUP flag when it wraps a message, so ``_Connection`` overrides
+aiomqtt's (private) ``_on_message`` hook to keep it; the pinned minor keeps that stable
+and tests/integration/test_mqtt_client.py checks it against a broker that sets DUP.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import ssl
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Self
+from urllib.parse import urlsplit
+
+import aiomqtt
+import paho.mqtt.client as paho
+from aiomqtt.exceptions import MqttConnectError as _RefusedByBroker
+
+from bridge.config import MqttConfig, TlsConfig
+from bridge.mqtt.errors import (
+    MqttConnectError,
+    MqttDisconnectedError,
+    MqttError,
+    MqttRefusedError,
+)
+
+__all__ = [
+    "Message",
+    "MqttClient",
+    "MqttConnectError",
+    "MqttDisconnectedError",
+    "MqttError",
+    "MqttRefusedError",
+    "run_with_reconnect",
+]
+
+ONLINE = b"online"
+OFFLINE = b"offline"
+_UNSUPPORTED_PROTOCOL_VERSION = 0x84  # CONNACK reason code (3.1.1 return code 1 maps to it)
+_TIMEOUT = 10.0  # seconds for CONNACK, PUBACK, SUBACK, UNSUBACK
+_CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
+_FAILURE = 0x80  # SUBACK reason codes from 0x80 up are failures
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Message:
+    """An incoming message; ``duplicate`` is the DUP flag (a QoS>0 redelivery)."""
+
+    topic: str
+    payload: bytes
+    qos: int
+    retain: bool
+    duplicate: bool
+    mid: int | None  # the packet identifier of a QoS 1/2 delivery, None for QoS 0
+
+
+class _Received(aiomqtt.Message):
+    """aiomqtt's message plus the DUP flag that aiomqtt leaves out."""
+
+    def __init__(self, message: paho.MQTTMessage) -> None:
+        super().__init__(
+            message.topic, bytes(message.payload), message.qos, message.retain, message.mid, None
+        )
+        self.duplicate = bool(message.dup)
+
+
+class _Connection(aiomqtt.Client):
+    """aiomqtt's client, keeping DUP and routing retained messages to ``retained()``."""
+
+    def __init__(self, hostname: str, port: int, **options: Any) -> None:
+        super().__init__(hostname, port, **options)
+        self.collectors: dict[str, asyncio.Queue[_Received]] = {}
+
+    def _on_message(self, _client: paho.Client, _userdata: Any, message: paho.MQTTMessage) -> None:
+        received = _Received(message)
+        if received.retain:
+            for topic_filter, queue in self.collectors.items():
+                if received.topic.matches(topic_filter):
+                    queue.put_nowait(received)
+                    return
+        self._queue.put_nowait(received)  # unbounded: never QueueFull
+
+    def abort(self) -> None:
+        """Close a connection that never completed; paho's close also stops aiomqtt's tasks."""
+        self._client._sock_close()
+
+
+class MqttClient:
+    """One broker session: ``async with MqttClient(config, will_topic=...) as client``."""
+
+    def __init__(
+        self, config: MqttConfig, *, will_topic: str, client_id: str | None = None
+    ) -> None:
+        self._config = config
+        self._will_topic = will_topic
+        self._client_id = client_id if client_id is not None else config.client_id
+        self._connection: _Connection | None = None
+        self._protocol: str | None = None
+        self._filters: set[str] = set()
+
+    @property
+    def protocol(self) -> str:
+        """The MQTT version in use, ``"5"`` or ``"3.1.1"`` (after a fallback)."""
+        if self._protocol is None:
+            raise MqttDisconnectedError("not connected")
+        return self._protocol
+
+    async def __aenter__(self) -> Self:
+        url = self._config.url
+        try:
+            context = await asyncio.to_thread(_tls_context, self._config)
+        except (OSError, ssl.SSLError) as exc:
+            raise MqttConnectError(f"{url}: cannot load TLS files: {exc}") from exc
+        if self._config.version == "5":
+            try:
+                connection = await self._open(aiomqtt.ProtocolVersion.V5, context)
+            except MqttConnectError as exc:
+                if exc.code != _UNSUPPORTED_PROTOCOL_VERSION:
+                    raise
+                _log.info("%s does not speak MQTT 5; using 3.1.1", url)
+                connection = await self._open(aiomqtt.ProtocolVersion.V311, context)
+        else:
+            connection = await self._open(aiomqtt.ProtocolVersion.V311, context)
+        self._connection = connection
+        try:
+            await self.publish(self._will_topic, ONLINE, retain=True)
+        except MqttDisconnectedError:
+            await self.__aexit__(None, None, None)
+            raise
+        return self
+
+    async def _open(
+        self, protocol: aiomqtt.ProtocolVersion, context: ssl.SSLContext | None
+    ) -> _Connection:
+        config = self._config
+        try:
+            password = config.password_value()
+        except OSError as exc:
+            raise MqttConnectError(
+                f"{config.url}: cannot read the password: {exc.strerror}"
+            ) from exc
+        connection = _Connection(
+            config.host,
+            config.port,
+            identifier=self._client_id,
+            username=config.username,
+            password=password,
+            protocol=protocol,
+            will=aiomqtt.Will(self._will_topic, OFFLINE, qos=1, retain=True),
+            keepalive=round(config.keepalive),
+            tls_context=context,
+            timeout=_TIMEOUT,
+            logger=_log.getChild("paho"),
+        )
+        try:
+            await connection.__aenter__()
+        except BaseException as exc:  # also cancelled: aiomqtt leaves the socket open
+            connection.abort()
+            if isinstance(exc, _RefusedByBroker):
+                code = exc.rc if isinstance(exc.rc, int) or exc.rc is None else exc.rc.value
+                raise MqttConnectError(f"{config.url} refused the connection: {exc}", code) from exc
+            if isinstance(exc, aiomqtt.MqttError):
+                raise MqttConnectError(f"cannot connect to {config.url}: {exc}") from exc
+            raise
+        self._protocol = "5" if protocol is aiomqtt.ProtocolVersion.V5 else "3.1.1"
+        return connection
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        connection, self._connection = self._connection, None
+        self._protocol = None
+        self._filters.clear()
+        if connection is None:
+            return
+        try:
+            await connection.publish(self._will_topic, OFFLINE, 1, True, timeout=_CLOSE_TIMEOUT)
+            await connection.__aexit__(exc_type, exc, tb)
+        except aiomqtt.MqttError as error:  # already lost: the broker publishes the will
+            _log.debug("no clean MQTT disconnect: %s", error)
+        finally:
+            connection.abort()  # no-op after a clean DISCONNECT; closes a stuck socket
+
+    def _require(self) -> _Connection:
+        if self._connection is None:
+            raise MqttDisconnectedError("not connected")
+        return self._connection
+
+    async def publish(
+        self, topic: str, payload: str | bytes, *, retain: bool = False, qos: int = 1
+    ) -> None:
+        """Publish and, for QoS 1/2, wait for the broker's acknowledgement."""
+        connection = self._require()
+        try:
+            await connection.publish(topic, payload, qos, retain)
+        except aiomqtt.MqttError as exc:
+            raise MqttDisconnectedError(f"publish to {topic}: {exc}") from exc
+
+    async def subscribe(self, *filters: str, qos: int = 1) -> None:
+        """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused."""
+        connection = self._require()
+        if not filters:
+            return
+        try:
+            codes = await connection.subscribe([(f, qos) for f in filters])
+        except aiomqtt.MqttError as exc:
+            raise MqttDisconnectedError(f"subscribe to {', '.join(filters)}: {exc}") from exc
+        refused = [f for f, code in zip(filters, codes, strict=True) if _value(code) >= _FAILURE]
+        if refused:
+            raise MqttRefusedError(f"the broker refused the subscription to {', '.join(refused)}")
+        self._filters.update(filters)
+
+    async def messages(self) -> AsyncIterator[Message]:
+        """Every message of the subscriptions, in arrival order, until the session ends."""
+        iterator = self._require().messages
+        while True:
+            try:
+                received = await anext(iterator)
+            except aiomqtt.MqttError as exc:
+                raise MqttDisconnectedError(
+                    f"connection to {self._config.url} lost: {exc}"
+                ) from exc
+            yield _message(received)
+
+    async def retained(self, topic_filter: str, *, settle: float = 0.5) -> dict[str, bytes]:
+        """The retained messages under ``topic_filter`` now (topic -> payload).
+
+        Subscribes, collects until no retained message came for ``settle`` seconds, then
+        unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
+        keep flowing to ``messages()`` meanwhile.
+        """
+        connection = self._require()
+        kept = topic_filter in self._filters
+        found: dict[str, bytes] = {}
+        queue: asyncio.Queue[_Received] = asyncio.Queue()
+        connection.collectors[topic_filter] = queue
+        try:
+            await self.subscribe(topic_filter)
+            while True:
+                try:
+                    received = await asyncio.wait_for(queue.get(), settle)
+                except TimeoutError:
+                    break
+                found[received.topic.value] = received.payload
+            if not kept:
+                await self._unsubscribe(connection, topic_filter)
+        finally:
+            del connection.collectors[topic_filter]
+        while not queue.empty():  # arrived between the last wait and the UNSUBACK
+            received = queue.get_nowait()
+            found[received.topic.value] = received.payload
+        return found
+
+    async def _unsubscribe(self, connection: _Connection, topic_filter: str) -> None:
+        try:
+            await connection.unsubscribe(topic_filter)
+        except aiomqtt.MqttError as exc:
+            raise MqttDisconnectedError(f"unsubscribe from {topic_filter}: {exc}") from exc
+        self._filters.discard(topic_filter)
+
+
+def _value(code: int | Any) -> int:
+    return code if isinstance(code, int) else int(code.value)
+
+
+def _message(received: aiomqtt.Message) -> Message:
+    return Message(
+        topic=received.topic.value,
+        payload=bytes(received.payload),
+        qos=received.qos,
+        retain=bool(received.retain),
+        duplicate=isinstance(received, _Received) and received.duplicate,
+        mid=received.mid if received.qos > 0 else None,
+    )
+
+
+class _ClosingSSLSocket(ssl.SSLSocket):
+    """paho leaves the socket open when the TLS handshake fails; close it right there."""
+
+    def do_handshake(self, block: bool = False) -> None:
+        try:
+            super().do_handshake(block)
+        except BaseException:
+            self.close()
+            raise
+
+
+def _tls_context(config: MqttConfig) -> ssl.SSLContext | None:
+    """The TLS context for mqtts:// (None for mqtt://); reads the CA and key files."""
+    if urlsplit(config.url).scheme != "mqtts":
+        return None
+    tls = config.tls or TlsConfig()
+    context = ssl.create_default_context(cafile=tls.ca)
+    context.sslsocket_class = _ClosingSSLSocket
+    if tls.cert is not None:
+        context.load_cert_chain(tls.cert, tls.key)
+    if tls.insecure:
+        context.check_hostname = False
+        context.verify_mode = ssl.CERT_NONE
+    return context
+
+
+async def run_with_reconnect(
+    config: MqttConfig,
+    will_topic: str,
+    session: Callable[[MqttClient], Awaitable[None]],
+    *,
+    backoff_initial: float = 1.0,
+    backoff_max: float = 60.0,
+    on_state: Callable[[str], None] | None = None,
+) -> None:
+    """Run ``session`` on a connected client, reconnecting for as long as it takes.
+
+    ``session`` is entered again on every connect, so it subscribes and republishes there.
+    After a failed connect or a lost session the loop sleeps ``backoff_initial`` seconds,
+    doubling up to ``backoff_max``, reset by a successful connect. ``on_state`` hears
+    ``"online"`` after each connect and ``"offline"`` when a session is lost. Returns
+    when ``session`` returns; any error other than MqttConnectError/MqttDisconnectedError
+    propagates. The outage is logged once when it starts and once when it ends.
+    """
+    backoff = backoff_initial
+    outage: str | None = None
+    while True:
+        connected = False
+        try:
+            async with MqttClient(config, will_topic=will_topic) as client:
+                connected = True
+                backoff = backoff_initial
+                if outage is not None:
+                    _log.info("MQTT broker %s reachable again", config.url)
+                    outage = None
+                if on_state is not None:
+                    on_state("online")
+                await session(client)
+            return
+        except* (MqttConnectError, MqttDisconnectedError) as group:
+            reason = str(group.exceptions[0])
+        if connected and on_state is not None:
+            on_state("offline")
+        if outage is None:
+            _log.warning("MQTT: %s; retrying with backoff up to %gs", reason, backoff_max)
+            outage = reason
+        else:
+            _log.debug("MQTT still unavailable: %s", reason)
+        await asyncio.sleep(backoff)
+        backoff = min(backoff * 2, backoff_max)

@@ -1,0 +1,42 @@
+"""The MQTT branch of the exception tree (under ``bridge.errors.BridgeError``).
+
+    BridgeError
+    └── MqttError                   talking to the broker did not succeed
+        ├── MqttConnectError        no session was established: the broker is unreachable,
+        │                           the TLS handshake or certificate check failed, or the
+        │                           broker refused the CONNECT (bad user name or password,
+        │                           not authorised, protocol); ``code`` is the MQTT 5 CONNACK
+        │                           reason code when the broker answered (3.1.1 codes are
+        │                           translated: 4 -> 134), else None
+        ├── MqttDisconnectedError   an established session was lost (socket closed, keepalive
+        │                           expired, broker restarted) or an operation on it timed out
+        └── MqttRefusedError        the broker answered a SUBSCRIBE with a failure code (an
+                                    ACL); the session itself is fine
+
+``run_with_reconnect`` retries after MqttConnectError and MqttDisconnectedError (bare or
+inside an ExceptionGroup from the session's TaskGroup); every other error propagates.
+"""
+
+from __future__ import annotations
+
+from bridge.errors import BridgeError
+
+
+class MqttError(BridgeError):
+    """Talking to the MQTT broker did not succeed."""
+
+
+class MqttConnectError(MqttError):
+    """No MQTT session could be established (unreachable, TLS, refused CONNACK)."""
+
+    def __init__(self, message: str, code: int | None = None) -> None:
+        self.code = code
+        super().__init__(message)
+
+
+class MqttDisconnectedError(MqttError):
+    """An established MQTT session was lost or an operation on it timed out."""
+
+
+class MqttRefusedError(MqttError):
+    """The broker refused a subscription (typically an ACL)."""

@@ -1,0 +1,336 @@
+"""bridge.mqtt against a real mosquitto (and a byte-level stub for what mosquitto won't do)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+from collections.abc import AsyncIterator, Awaitable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pytest
+
+from bridge.config import MqttConfig, TlsConfig
+from bridge.mqtt import (
+    Message,
+    MqttClient,
+    MqttConnectError,
+    MqttDisconnectedError,
+    run_with_reconnect,
+)
+from tests.conftest import BROKER_PASSWORD, BROKER_USER
+from tests.integration.mosquitto import Broker, TlsFiles
+
+STATE = "t/bridge/state"
+T = TypeVar("T")
+
+
+def cfg(url: str, **fields: Any) -> MqttConfig:
+    return MqttConfig(url=url, keepalive=5, **fields)
+
+
+async def within(awaitable: Awaitable[T], seconds: float = 5) -> T:
+    return await asyncio.wait_for(awaitable, seconds)
+
+
+async def next_message(client: MqttClient) -> Message:
+    return await within(anext(aiter(client.messages())))
+
+
+@contextlib.asynccontextmanager
+async def watcher(url: str, *filters: str) -> AsyncIterator[MqttClient]:
+    """A second client, subscribed to ``filters``."""
+    async with MqttClient(cfg(url), will_topic="t/watcher/state") as client:
+        await client.subscribe(*filters)
+        yield client
+
+
+# -- sessions ------------------------------------------------------------------------
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("version", ["5", "3.1.1"])
+async def test_publish_subscribe_round_trip(mosquitto: Broker, version: str) -> None:
+    async with MqttClient(cfg(mosquitto.url, version=version), will_topic=STATE) as client:
+        assert client.protocol == version
+        await client.subscribe("t/in/#", "t/other")
+        async with watcher(mosquitto.url) as other:
+            await other.publish("t/in/x", "hello")
+        message = await next_message(client)
+    assert (message.topic, message.payload, message.qos, message.retain) == (
+        "t/in/x",
+        b"hello",
+        1,
+        False,
+    )
+    assert message.duplicate is False
+    assert isinstance(message.mid, int)
+
+
+@pytest.mark.asyncio
+async def test_online_while_connected_offline_after_a_clean_exit(mosquitto: Broker) -> None:
+    async with MqttClient(cfg(mosquitto.url), will_topic=STATE), watcher(mosquitto.url) as other:
+        assert await other.retained(STATE, settle=0.2) == {STATE: b"online"}
+    async with watcher(mosquitto.url) as other:
+        assert await other.retained(STATE, settle=0.2) == {STATE: b"offline"}
+
+
+@pytest.mark.asyncio
+async def test_last_will_when_the_connection_dies(mosquitto: Broker) -> None:
+    async with (
+        MqttClient(cfg(mosquitto.url), will_topic=STATE) as client,
+        watcher(mosquitto.url, STATE) as other,
+    ):
+        assert (await next_message(other)).payload == b"online"
+        # Cut the TCP connection under paho: no DISCONNECT is sent, so the broker
+        # publishes the will while ``client`` is still inside its context.
+        client._connection._client.socket().shutdown(socket.SHUT_RDWR)  # type: ignore[union-attr]
+        will = await next_message(other)
+        assert (will.topic, will.payload) == (STATE, b"offline")
+        with pytest.raises(MqttDisconnectedError):
+            await within(anext(aiter(client.messages())))
+        with pytest.raises(MqttDisconnectedError):
+            await client.publish("t/x", "lost")
+
+
+@pytest.mark.asyncio
+async def test_retained_returns_the_retained_set_then_unsubscribes(mosquitto: Broker) -> None:
+    async with watcher(mosquitto.url) as other:
+        for topic in ("ha/device/a/config", "ha/device/b/config", "ha/sensor/c/config"):
+            await other.publish(topic, topic.upper(), retain=True)
+        async with MqttClient(cfg(mosquitto.url), will_topic=STATE) as client:
+            await client.subscribe("t/live")
+            found = await client.retained("ha/device/+/config", settle=0.2)
+            assert found == {
+                "ha/device/a/config": b"HA/DEVICE/A/CONFIG",
+                "ha/device/b/config": b"HA/DEVICE/B/CONFIG",
+            }
+            await other.publish("ha/device/d/config", "late")  # no longer subscribed
+            await other.publish("t/live", "live")
+            assert (await next_message(client)).topic == "t/live"
+
+
+@pytest.mark.asyncio
+async def test_nothing_listening_is_a_connect_error(mosquitto: Broker) -> None:
+    mosquitto.stop()
+    with pytest.raises(MqttConnectError, match="cannot connect"):
+        async with MqttClient(cfg(mosquitto.url), will_topic=STATE):
+            pass
+
+
+# -- user name and password -------------------------------------------------------------
+
+
+@pytest.mark.asyncio
+async def test_password_from_a_file_is_accepted(mosquitto_auth: Broker, tmp_path: Path) -> None:
+    secret = tmp_path / "mqtt-password"
+    secret.write_text(BROKER_PASSWORD + "\n")
+    config = cfg(mosquitto_auth.url, username=BROKER_USER, password_file=secret)
+    async with MqttClient(config, will_topic=STATE) as client:
+        assert await client.retained(STATE, settle=0.1) == {STATE: b"online"}
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("version", ["5", "3.1.1"])
+async def test_bad_password_is_refused(mosquitto_auth: Broker, version: str) -> None:
+    config = cfg(mosquitto_auth.url, username=BROKER_USER, password="wrong", version=version)
+    with pytest.raises(MqttConnectError, match="refused") as refused:
+        async with MqttClient(config, will_topic=STATE):
+            pass
+    # mosquitto 2.0 answers "not authorised" (0x87; 3.1.1 code 5), others 0x86 (code 4)
+    assert refused.value.code in (0x86, 0x87)
+
+
+# -- TLS --------------------------------------------------------------------------------
+
+
+@pytest.mark.asyncio
+async def test_tls_with_the_signing_ca(mosquitto_tls: Broker, tls_files: TlsFiles) -> None:
+    config = cfg(mosquitto_tls.url, tls=TlsConfig(ca=tls_files.ca))
+    async with MqttClient(config, will_topic=STATE) as client:
+        assert await client.retained(STATE, settle=0.1) == {STATE: b"online"}
+
+
+@pytest.mark.asyncio
+async def test_tls_untrusted_ca_fails_unless_insecure(
+    mosquitto_tls: Broker, tls_files: TlsFiles
+) -> None:
+    untrusted = cfg(mosquitto_tls.url, tls=TlsConfig(ca=tls_files.other_ca))
+    with pytest.raises(MqttConnectError, match="CERTIFICATE_VERIFY_FAILED"):
+        async with MqttClient(untrusted, will_topic=STATE):
+            pass
+    insecure = cfg(mosquitto_tls.url, tls=TlsConfig(ca=tls_files.other_ca, insecure=True))
+    async with MqttClient(insecure, will_topic=STATE) as client:
+        assert client.protocol == "5"
+
+
+@pytest.mark.asyncio
+async def test_tls_client_certificate(mosquitto_mtls: Broker, tls_files: TlsFiles) -> None:
+    tls = TlsConfig(ca=tls_files.ca, cert=tls_files.client_cert, key=tls_files.client_key)
+    async with MqttClient(cfg(mosquitto_mtls.url, tls=tls), will_topic=STATE) as client:
+        assert await client.retained(STATE, settle=0.1) == {STATE: b"online"}
+
+
+# -- the reconnect loop -----------------------------------------------------------------
+
+
+@pytest.mark.asyncio
+async def test_run_with_reconnect_survives_a_broker_restart(mosquitto: Broker) -> None:
+    sessions: asyncio.Queue[int] = asyncio.Queue()
+    entered = 0
+    received: asyncio.Queue[Message] = asyncio.Queue()
+    states: list[str] = []
+
+    async def session(client: MqttClient) -> None:
+        nonlocal entered
+        entered += 1
+        await client.subscribe("t/in/#")
+        sessions.put_nowait(entered)
+        async for message in client.messages():
+            received.put_nowait(message)
+
+    loop = run_with_reconnect(
+        cfg(mosquitto.url), STATE, session, backoff_initial=0.05, backoff_max=0.2,
+        on_state=states.append,
+    )  # fmt: skip
+    task = asyncio.ensure_future(loop)
+    try:
+        assert await within(sessions.get()) == 1
+        await asyncio.to_thread(mosquitto.restart)
+        assert await within(sessions.get()) == 2
+        async with watcher(mosquitto.url) as other:
+            await other.publish("t/in/after", "restart")
+            assert await other.retained(STATE, settle=0.1) == {STATE: b"online"}
+        message = await within(received.get())
+        assert (message.topic, message.payload) == ("t/in/after", b"restart")
+        assert states == ["online", "offline", "online"]
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    async with watcher(mosquitto.url) as other:  # cancelled = a clean exit
+        assert await other.retained(STATE, settle=0.1) == {STATE: b"offline"}
+
+
+@pytest.mark.asyncio
+async def test_run_with_reconnect_returns_when_the_session_does(mosquitto: Broker) -> None:
+    calls: list[MqttClient] = []
+
+    async def session(client: MqttClient) -> None:
+        calls.append(client)
+
+    await within(run_with_reconnect(cfg(mosquitto.url), STATE, session))
+    assert len(calls) == 1
+
+
+# -- what mosquitto won't do: refuse MQTT 5, redeliver with DUP -------------------------
+
+
+class StubBroker:
+    """Speaks just enough MQTT 3.1.1 at byte level; refuses MQTT 5 like a 3.1.1 broker.
+
+    On each SUBSCRIBE it answers SUBACK and then sends a QoS 1 PUBLISH with DUP set.
+    """
+
+    def __init__(self, *, silent: bool = False) -> None:
+        self.silent = silent  # never answer CONNECT
+        self.levels: list[int] = []
+        self.server: asyncio.Server | None = None
+
+    async def __aenter__(self) -> str:
+        self.server = await asyncio.start_server(self._serve, "127.0.0.1", 0)
+        port = self.server.sockets[0].getsockname()[1]
+        return f"mqtt://127.0.0.1:{port}"
+
+    async def __aexit__(self, *exc: object) -> None:
+        assert self.server is not None
+        self.server.close()
+        await self.server.wait_closed()
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            await self._talk(reader, writer)
+        except asyncio.IncompleteReadError:
+            pass
+        finally:
+            writer.close()
+            with contextlib.suppress(ConnectionError):
+                await writer.wait_closed()
+
+    async def _talk(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        while True:
+            first, body = await read_packet(reader)
+            kind = first & 0xF0
+            if kind == 0x10:  # CONNECT: protocol name (2 + 4 bytes), then the level
+                self.levels.append(body[6])
+                if self.silent:
+                    continue
+                if body[6] != 4:
+                    writer.write(b"\x20\x02\x00\x01")  # unacceptable protocol version
+                    await writer.drain()
+                    return
+                writer.write(b"\x20\x02\x00\x00")
+            elif kind == 0x30 and first & 0x06:  # PUBLISH QoS>0: PUBACK its id
+                topic_length = int.from_bytes(body[0:2])
+                writer.write(b"\x40\x02" + body[2 + topic_length : 4 + topic_length])
+            elif kind == 0x80:  # SUBSCRIBE: SUBACK QoS 1, then a redelivered PUBLISH
+                writer.write(b"\x90\x03" + body[0:2] + b"\x01")
+                publish = b"\x00\x05cmd/x" + (7).to_bytes(2) + b"ON"
+                writer.write(bytes([0x3A, len(publish)]) + publish)  # PUBLISH, DUP, QoS 1
+            elif kind == 0xC0:
+                writer.write(b"\xd0\x00")  # PINGRESP
+            elif kind == 0xE0:
+                return  # DISCONNECT
+            await writer.drain()
+
+
+async def read_packet(reader: asyncio.StreamReader) -> tuple[int, bytes]:
+    """(first byte: type and flags, the rest after the remaining length)."""
+    first = (await reader.readexactly(1))[0]
+    length, shift = 0, 0
+    while True:
+        byte = (await reader.readexactly(1))[0]
+        length |= (byte & 0x7F) << shift
+        shift += 7
+        if not byte & 0x80:
+            break
+    return first, await reader.readexactly(length)
+
+
+@pytest.mark.asyncio
+async def test_falls_back_to_3_1_1_when_the_broker_refuses_5() -> None:
+    stub = StubBroker()
+    async with stub as url, MqttClient(cfg(url, version="5"), will_topic=STATE) as client:
+        assert client.protocol == "3.1.1"
+    assert stub.levels == [5, 4]
+
+
+@pytest.mark.asyncio
+async def test_dup_flag_and_mid_of_a_redelivery() -> None:
+    async with (
+        StubBroker() as url,
+        MqttClient(cfg(url, version="3.1.1"), will_topic=STATE) as client,
+    ):
+        await client.subscribe("cmd/#")
+        message = await next_message(client)
+    assert message == Message(
+        topic="cmd/x", payload=b"ON", qos=1, retain=False, duplicate=True, mid=7
+    )
+
+
+@pytest.mark.asyncio
+async def test_cancelled_while_waiting_for_connack_leaves_nothing_running() -> None:
+    stub = StubBroker(silent=True)
+    async with stub as url:
+        connecting = asyncio.ensure_future(MqttClient(cfg(url), will_topic=STATE).__aenter__())
+        for _ in range(500):
+            if stub.levels:
+                break
+            await asyncio.sleep(0.01)
+        connecting.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await connecting
+    await asyncio.sleep(0)
+    leftovers = [task for task in asyncio.all_tasks() if "_misc_loop" in repr(task.get_coro())]
+    assert leftovers == []
