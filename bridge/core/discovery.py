@@ -1,0 +1,240 @@
+"""Home Assistant MQTT discovery payloads for the bridge and its devices. Pure.
+
+Device-based discovery (the default): one retained JSON document per device on
+``<prefix>/device/<device>/config`` holding ``device``, ``origin``, the shared
+availability (the bridge's and the device's, both required: ``availability_mode: all``)
+and one ``cmps`` entry per published entity, plus ``status`` (when the status entity
+has another key) and ``alarms`` (when the mapping has alarm entities). Entity
+mode (for Home Assistant versions without device-based discovery) publishes the same
+components one by one on ``<prefix>/<component>/<device>/<key>/config`` with the shared
+options inlined.
+
+The state topic is set per component rather than shared at the root: Home Assistant
+copies a shared ``state_topic`` into every component, and a write-only number or select
+(a command word) would then parse the whole state document as its value. Without a
+state topic those run optimistic, as they must.
+
+``units`` are units read from registers (``unit_from``) and ``limits`` the current
+limits read from registers (``min_from``/``max_from``, see ``codec.limits_of``): the
+app rebuilds and republishes discovery when either changes.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping as AnyMapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, Literal
+
+from bridge import __version__
+from bridge.core.discovery_entity import (
+    QOS,
+    ComponentContext,
+    Config,
+    Limits,
+    alarms_config,
+    component_config,
+    slug,
+    status_config,
+)
+from bridge.core.entity import Entity
+from bridge.core.mapping import Mapping
+from bridge.core.topics import Topics
+
+SUPPORT_URL = "https://github.com/modbus-mqtt-bridge/modbus-mqtt-bridge"
+STATUS_KEY = "status"
+ALARMS_KEY = "alarms"
+BRIDGE_NAME = "Modbus MQTT bridge"
+_NO_UNITS: AnyMapping[str, str | None] = MappingProxyType({})
+_NO_LIMITS: AnyMapping[str, Limits] = MappingProxyType({})
+_ROOT_ONLY = ("cmps",)
+
+Mode = Literal["device", "entity"]
+
+
+@dataclass(frozen=True, slots=True)
+class Publish:
+    """One MQTT message to send."""
+
+    topic: str
+    payload: str  # serialized JSON; "" deletes a retained config
+    retain: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceInfo:
+    """What discovery needs to know of one configured device."""
+
+    id: str
+    name: str
+    mapping: Mapping
+    options: dict[str, str]
+    bus: str
+    unit: int
+    allow_dangerous_writes: bool
+    fast_interval: float
+    slow_interval: float
+
+
+@dataclass(frozen=True, slots=True)
+class Origin:
+    """The software that publishes the discovery messages: the bridge itself."""
+
+    name: str = "modbus-mqtt-bridge"
+    sw_version: str = __version__
+    support_url: str = SUPPORT_URL
+
+    def as_dict(self) -> dict[str, str]:
+        return {"name": self.name, "sw_version": self.sw_version, "support_url": self.support_url}
+
+
+def bridge_identifier(topics: Topics) -> str:
+    """The bridge device's identifier, which every device's ``via_device`` names."""
+    return f"{topics.base}_bridge"
+
+
+def build_device_discovery(
+    device: DeviceInfo,
+    topics: Topics,
+    origin: Origin,
+    *,
+    units: AnyMapping[str, str | None] = _NO_UNITS,
+    limits: AnyMapping[str, Limits] = _NO_LIMITS,
+    state_refresh: float = 300.0,
+) -> dict[str, Any]:
+    """The device-based discovery payload for ``<prefix>/device/<device>/config``."""
+    context = ComponentContext(
+        topics=topics,
+        device_id=device.id,
+        allow_dangerous_writes=device.allow_dangerous_writes,
+        fast_interval=device.fast_interval,
+        slow_interval=device.slow_interval,
+        state_refresh=state_refresh,
+        units=units,
+        limits=limits,
+    )
+    return {
+        "device": {
+            "identifiers": [f"{topics.base}_{device.id}"],
+            "manufacturer": device.mapping.manufacturer,
+            "model": device.mapping.model,
+            "name": device.name,
+            "via_device": bridge_identifier(topics),
+        },
+        "origin": origin.as_dict(),
+        "availability": [
+            {"topic": topics.bridge_state},
+            {"topic": topics.availability(device.id)},
+        ],
+        "availability_mode": "all",
+        "cmps": device_components(device.mapping, device.options, context),
+    }
+
+
+def device_components(
+    mapping: Mapping, options: AnyMapping[str, str], context: ComponentContext
+) -> dict[str, Config]:
+    """Every component of one device, by key: entities, then ``status`` and ``alarms``."""
+    active = mapping.active(dict(options))
+    components: dict[str, Config] = {}
+    for key, entity in active.items():
+        config = component_config(key, entity, context)
+        if config is not None:
+            components[key] = config
+    status = _status_entity(mapping, active)
+    if status is not None:
+        components[STATUS_KEY] = status_config(status, context)
+    if any(entity.alarm for entity in active.values()):
+        components[ALARMS_KEY] = alarms_config(context)
+    return components
+
+
+def _status_entity(mapping: Mapping, active: AnyMapping[str, Entity]) -> Entity | None:
+    """The entity behind the state document's ``status``, when it needs a component of
+    its own (an entity keyed ``status`` is that component already)."""
+    key = mapping.status
+    if key is None or key == STATUS_KEY or key not in active:
+        return None
+    entity = active[key]
+    return None if entity.secret or not entity.readable else entity
+
+
+def build_discovery(
+    device: DeviceInfo,
+    topics: Topics,
+    origin: Origin,
+    *,
+    mode: Mode,
+    units: AnyMapping[str, str | None] = _NO_UNITS,
+    limits: AnyMapping[str, Limits] = _NO_LIMITS,
+    state_refresh: float = 300.0,
+) -> list[Publish]:
+    """The retained discovery messages of one device: one (device mode) or one per
+    component (entity mode)."""
+    payload = build_device_discovery(
+        device, topics, origin, units=units, limits=limits, state_refresh=state_refresh
+    )
+    if mode == "device":
+        return [Publish(topics.device_config(device.id), dump(payload))]
+    return _per_component(payload, topics, device.id)
+
+
+def build_bridge_discovery(
+    topics: Topics, origin: Origin, bridge_id: str, *, mode: Mode = "device"
+) -> list[Publish]:
+    """The bridge as a device of its own, with a connectivity binary_sensor on
+    ``<base>/bridge/state`` (no availability: offline shows as disconnected).
+
+    ``bridge_id`` names the bridge in the discovery topic
+    (``<prefix>/device/<bridge_id>/config``) and in its entity id.
+    """
+    identifier = bridge_identifier(topics)
+    connection = {
+        "platform": "binary_sensor",
+        "unique_id": f"{identifier}_connection_state",
+        "default_entity_id": f"binary_sensor.{slug(bridge_id)}_connection_state",
+        "name": "Connection state",
+        "qos": QOS,
+        "entity_category": "diagnostic",
+        "enabled_by_default": True,
+        "device_class": "connectivity",
+        "state_topic": topics.bridge_state,
+        "payload_on": "online",
+        "payload_off": "offline",
+    }
+    payload = {
+        "device": {
+            "identifiers": [identifier],
+            "manufacturer": origin.name,
+            "model": BRIDGE_NAME,
+            "name": BRIDGE_NAME,
+            "sw_version": origin.sw_version,
+        },
+        "origin": origin.as_dict(),
+        "cmps": {"connection_state": connection},
+    }
+    if mode == "device":
+        return [Publish(topics.device_config(bridge_id), dump(payload))]
+    return _per_component(payload, topics, bridge_id)
+
+
+def _per_component(payload: dict[str, Any], topics: Topics, node_id: str) -> list[Publish]:
+    """Entity-mode messages: each component with the shared root options inlined."""
+    shared = {name: value for name, value in payload.items() if name not in _ROOT_ONLY}
+    messages = []
+    for key, component in payload["cmps"].items():
+        body = {name: value for name, value in component.items() if name != "platform"}
+        topic = topics.entity_config(component["platform"], node_id, key)
+        messages.append(Publish(topic, dump(body | shared)))
+    return messages
+
+
+def removal(topic: str) -> Publish:
+    """The empty retained message that deletes a discovery config."""
+    return Publish(topic, "")
+
+
+def dump(payload: AnyMapping[str, Any]) -> str:
+    """Compact JSON, UTF-8 as is (units such as °C and m³)."""
+    return json.dumps(payload, ensure_ascii=False, separators=(",", ":"))

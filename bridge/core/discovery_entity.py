@@ -1,0 +1,299 @@
+"""One entity as a Home Assistant MQTT discovery component. Pure.
+
+``component_config(key, entity, context)`` returns the component mapping that goes under
+``cmps`` of a device-based discovery payload (with its ``platform``), or None when the
+entity is not published: secret, write-only and guarded by the dangerous-write switch,
+or write-only with nothing Home Assistant could show. A dangerous writable entity whose
+writes are not allowed is published read-only (sensor or binary_sensor, same key and
+unique_id) when it can be read.
+
+Values come from the device's JSON state document (``<base>/<device>``) through
+``{{ value_json.<key> }}``; a read-only component gets ``expire_after`` so that a value
+the bridge stopped refreshing goes unavailable. Write-only components have no state
+topic, which makes Home Assistant run them optimistic.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from collections.abc import Mapping as AnyMapping
+from dataclasses import dataclass
+from typing import Any
+
+from bridge.core.codec import raw_bounds, scale_value
+from bridge.core.entity import Component, DataType, Entity, PollClass
+from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
+from bridge.core.topics import Topics
+
+Config = dict[str, Any]
+Limits = tuple[float | None, float | None]
+
+# Payloads the bridge uses on the wire: the state document renders Python booleans
+# through the template, commands take ON/OFF and PRESS (see DESIGN.md, MQTT contract).
+STATE_TRUE = "True"
+STATE_FALSE = "False"
+COMMAND_ON = "ON"
+COMMAND_OFF = "OFF"
+COMMAND_PRESS = "PRESS"
+QOS = 1
+TEXT_MAX = 255  # Home Assistant's longest state
+ALARMS_TEMPLATE = f"{{{{ (value_json.alarms | join(', ') or 'none')[:{TEXT_MAX}] }}}}"
+_READ_ONLY = (Component.SENSOR, Component.BINARY_SENSOR)
+_SLUG = re.compile(r"[^a-z0-9_]+")
+
+
+@dataclass(frozen=True, slots=True)
+class ComponentContext:
+    """What every component of one device shares."""
+
+    topics: Topics
+    device_id: str
+    allow_dangerous_writes: bool
+    fast_interval: float
+    slow_interval: float
+    state_refresh: float
+    units: AnyMapping[str, str | None]
+    limits: AnyMapping[str, Limits]
+
+    @property
+    def unique_prefix(self) -> str:
+        return f"{self.topics.base}_{self.device_id}"
+
+    def expire_after(self, poll: PollClass) -> int:
+        """Seconds after which an unrefreshed value is stale: two state refreshes plus
+        one poll (every value is republished at least every ``state_refresh``)."""
+        interval = self.fast_interval if poll is PollClass.FAST else self.slow_interval
+        return int(2 * self.state_refresh + interval)
+
+
+def slug(text: str) -> str:
+    """An entity-id-safe form: lowercase letters, digits and ``_``."""
+    return _SLUG.sub("_", text.lower()).strip("_")
+
+
+def value_template(key: str) -> str:
+    return f"{{{{ value_json.{key} }}}}"
+
+
+def platform_of(entity: Entity, allow_dangerous_writes: bool) -> Component | None:
+    """The platform the entity is published as, or None when it is not published."""
+    if entity.secret:
+        return None
+    component = entity.component
+    guarded = entity.dangerous and not allow_dangerous_writes
+    if component in _READ_ONLY or guarded or not entity.writable:
+        if not entity.readable:
+            return None
+        return component if component in _READ_ONLY else read_only_platform(entity)
+    return component
+
+
+def read_only_platform(entity: Entity) -> Component:
+    return Component.BINARY_SENSOR if entity.kind == "bool" else Component.SENSOR
+
+
+def base_config(key: str, name: str, platform: Component, context: ComponentContext) -> Config:
+    """The options every component has: platform, ids, name and QoS.
+
+    QoS is set per component: Home Assistant up to 2026.2 at least accepts a shared
+    ``qos`` at the root of a device payload but does not pass it on to the components.
+    """
+    return {
+        "platform": platform.value,
+        "unique_id": f"{context.unique_prefix}_{key}",
+        "default_entity_id": f"{platform.value}.{slug(context.device_id)}_{key}",
+        "name": name,
+        "qos": QOS,
+    }
+
+
+def component_config(key: str, entity: Entity, context: ComponentContext) -> Config | None:
+    """The ``cmps`` entry of one entity, or None when the entity is not published."""
+    platform = platform_of(entity, context.allow_dangerous_writes)
+    if platform is None:
+        return None
+    config = base_config(key, entity.name, platform, context)
+    category = entity.ha.entity_category
+    if category == "config" and platform in _READ_ONLY:
+        category = "diagnostic"  # Home Assistant refuses config on sensors
+    if category is not None:
+        config["entity_category"] = category
+    config["enabled_by_default"] = entity.enabled_by_default
+    if entity.ha.icon is not None:
+        config["icon"] = entity.ha.icon
+    config |= _BUILDERS[platform](key, entity, context)
+    if platform in _READ_ONLY:
+        config["expire_after"] = context.expire_after(entity.poll_class)
+    return config
+
+
+def status_config(entity: Entity, context: ComponentContext) -> Config:
+    """The ``status`` component: the value of the mapping's status entity, read-only."""
+    platform = read_only_platform(entity)
+    config = base_config("status", "Status", platform, context)
+    config["enabled_by_default"] = True
+    if entity.ha.icon is not None:
+        config["icon"] = entity.ha.icon
+    config |= _BUILDERS[platform]("status", entity, context)
+    config["expire_after"] = context.expire_after(entity.poll_class)
+    return config
+
+
+def alarms_config(context: ComponentContext) -> Config:
+    """The ``alarms`` component: active alarm names joined, or ``none``."""
+    config = base_config("alarms", "Active alarms", Component.SENSOR, context)
+    return config | {
+        "enabled_by_default": True,
+        "icon": "mdi:alert",
+        "state_topic": context.topics.device(context.device_id),
+        "value_template": ALARMS_TEMPLATE,
+        "expire_after": context.expire_after(PollClass.FAST),
+    }
+
+
+# --- read-only platforms ---------------------------------------------------------------
+
+
+def _state(key: str, context: ComponentContext) -> Config:
+    return {
+        "state_topic": context.topics.device(context.device_id),
+        "value_template": value_template(key),
+    }
+
+
+def _sensor(key: str, entity: Entity, context: ComponentContext) -> Config:
+    config = _state(key, context)
+    if entity.enum is not None:
+        config |= {"device_class": "enum", "options": list(entity.enum.values())}
+    elif entity.kind == "number":
+        config |= numeric_sensor_options(key, entity, context)
+    return config
+
+
+def numeric_sensor_options(key: str, entity: Entity, context: ComponentContext) -> Config:
+    """device_class, state_class, unit and display precision of a numeric sensor."""
+    config: Config = {}
+    if entity.ha.device_class is not None:
+        config["device_class"] = entity.ha.device_class
+    if entity.ha.state_class is not None:
+        config["state_class"] = entity.ha.state_class
+    unit = unit_of(key, entity, context)
+    if unit is not None:
+        config["unit_of_measurement"] = unit
+    if entity.ha.display_precision is not None:
+        config["suggested_display_precision"] = entity.ha.display_precision
+    elif entity.data_type is not DataType.F32:  # a float has no fixed decimals
+        config["suggested_display_precision"] = entity.decimals
+    return config
+
+
+def unit_of(key: str, entity: Entity, context: ComponentContext) -> str | None:
+    """The fixed unit, or the one last read from the entity's unit register."""
+    if entity.unit_from is not None:
+        return context.units.get(key)
+    return entity.unit
+
+
+def _binary_sensor(key: str, entity: Entity, context: ComponentContext) -> Config:
+    config = _state(key, context) | {"payload_on": STATE_TRUE, "payload_off": STATE_FALSE}
+    device_class = entity.ha.device_class
+    if device_class not in BINARY_SENSOR_CLASSES:  # a switch's class, shown read-only
+        device_class = "problem" if entity.alarm else None
+    if device_class is not None:
+        config["device_class"] = device_class
+    return config
+
+
+# --- commanding platforms --------------------------------------------------------------
+
+
+def _command(key: str, entity: Entity, context: ComponentContext) -> Config:
+    """command_topic, plus the state when the entity can be read (else: optimistic)."""
+    config: Config = {"command_topic": context.topics.set(context.device_id, key)}
+    if entity.readable:
+        config |= _state(key, context)
+    return config
+
+
+def _number(key: str, entity: Entity, context: ComponentContext) -> Config:
+    low, high = number_range(key, entity, context)
+    config = _command(key, entity, context) | {
+        "min": low,
+        "max": high,
+        "step": entity.step if entity.step is not None else abs(entity.scale),
+        "mode": entity.ha.mode or "box",
+    }
+    unit = unit_of(key, entity, context)
+    if unit is not None:
+        config["unit_of_measurement"] = unit
+    if entity.ha.device_class is not None:
+        config["device_class"] = entity.ha.device_class
+    return config
+
+
+def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[float, float]:
+    """Limits read from the device, else the mapping's, else what the register holds."""
+    raw_low, raw_high = raw_bounds(entity)
+    ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
+    if entity.sign_from is not None:
+        ends = [-ends[1], ends[1]]
+    static = (
+        entity.min if entity.min is not None else ends[0],
+        entity.max if entity.max is not None else ends[1],
+    )
+    dynamic = context.limits.get(key, (None, None))
+    low = dynamic[0] if dynamic[0] is not None else static[0]
+    high = dynamic[1] if dynamic[1] is not None else static[1]
+    if low > high:  # limit registers that contradict each other: keep the mapping's
+        return static
+    return low, high
+
+
+def _select(key: str, entity: Entity, context: ComponentContext) -> Config:
+    return _command(key, entity, context) | {"options": list((entity.enum or {}).values())}
+
+
+def _switch(key: str, entity: Entity, context: ComponentContext) -> Config:
+    config = _command(key, entity, context) | {
+        "payload_on": COMMAND_ON,
+        "payload_off": COMMAND_OFF,
+    }
+    if entity.readable:
+        config |= {"state_on": STATE_TRUE, "state_off": STATE_FALSE}
+    if entity.ha.device_class in SWITCH_CLASSES:
+        config["device_class"] = entity.ha.device_class
+    return config
+
+
+def _button(key: str, entity: Entity, context: ComponentContext) -> Config:
+    config: Config = {
+        "command_topic": context.topics.set(context.device_id, key),
+        "payload_press": COMMAND_PRESS,
+    }
+    if entity.ha.device_class in BUTTON_CLASSES:
+        config["device_class"] = entity.ha.device_class
+    return config
+
+
+def _text(key: str, entity: Entity, context: ComponentContext) -> Config:
+    config = _command(key, entity, context) | {
+        "max": min(2 * entity.register_count, TEXT_MAX),
+        "mode": "text",
+    }
+    if entity.readable:  # unknown (null) shows as empty text, not as "None"
+        config["value_template"] = (
+            f"{{{{ value_json.{key} if value_json.{key} is not none else '' }}}}"
+        )
+    return config
+
+
+_BUILDERS: dict[Component, Callable[[str, Entity, ComponentContext], Config]] = {
+    Component.SENSOR: _sensor,
+    Component.BINARY_SENSOR: _binary_sensor,
+    Component.NUMBER: _number,
+    Component.SELECT: _select,
+    Component.SWITCH: _switch,
+    Component.BUTTON: _button,
+    Component.TEXT: _text,
+}

@@ -1,0 +1,692 @@
+"""Home Assistant discovery payloads: one test per rule, then exact snapshots.
+
+Snapshots live in tests/golden/discovery/ (pretty-printed, sorted keys). After an
+intended change, rewrite them with ``UPDATE_SNAPSHOTS=1 pytest tests/unit/test_discovery.py``
+and read the diff. ``tools/check_ha_discovery.py`` validates them with Home Assistant's
+own schemas (run by hand in a Home Assistant virtualenv, not by the test suite).
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import bridge
+from bridge.core.discovery import (
+    DeviceInfo,
+    Origin,
+    Publish,
+    build_bridge_discovery,
+    build_device_discovery,
+    build_discovery,
+    removal,
+)
+from bridge.core.mapping import Mapping, builtin_mapping_names, builtin_mapping_path, load_mapping
+from bridge.core.topics import Topics
+from tests.factory import make_mapping
+
+TOPICS = Topics("modbus", "homeassistant")
+ORIGIN = Origin(sw_version="test")
+GOLDEN = Path(__file__).resolve().parent.parent / "golden" / "discovery"
+STATE = "modbus/dev"
+AVAILABILITY = [{"topic": "modbus/bridge/state"}, {"topic": "modbus/dev/availability"}]
+
+
+def _device(mapping: Mapping, **fields: Any) -> DeviceInfo:
+    values: dict[str, Any] = {
+        "id": "dev",
+        "name": "Test device",
+        "mapping": mapping,
+        "options": {},
+        "bus": "rs485",
+        "unit": 1,
+        "allow_dangerous_writes": False,
+        "fast_interval": 2.0,
+        "slow_interval": 60.0,
+    } | fields
+    return DeviceInfo(**values)
+
+
+def _cmps(entities: dict[str, dict[str, Any]], **kwargs: Any) -> dict[str, Any]:
+    """The components built for a mapping of ``entities`` (kwargs: DeviceInfo fields,
+    units, limits, state_refresh, or mapping top-level fields prefixed ``mapping_``)."""
+    top = {k.removeprefix("mapping_"): v for k, v in kwargs.items() if k.startswith("mapping_")}
+    build = {k: kwargs.pop(k) for k in ("units", "limits", "state_refresh") if k in kwargs}
+    fields = {k: v for k, v in kwargs.items() if not k.startswith("mapping_")}
+    device = _device(make_mapping(entities, **top), **fields)
+    payload = build_device_discovery(device, TOPICS, ORIGIN, **build)
+    return dict(payload["cmps"])
+
+
+def _one(entity: dict[str, Any], **kwargs: Any) -> dict[str, Any] | None:
+    entity = {"name": "Value", "address": 0} | entity
+    return _cmps({"value": entity}, **kwargs).get("value")
+
+
+def _ids(platform: str, key: str = "value") -> dict[str, Any]:
+    return {
+        "platform": platform,
+        "unique_id": f"modbus_dev_{key}",
+        "default_entity_id": f"{platform}.dev_{key}",
+        "qos": 1,
+    }
+
+
+def _state(key: str = "value") -> dict[str, Any]:
+    return {"state_topic": STATE, "value_template": f"{{{{ value_json.{key} }}}}"}
+
+
+# --- the device payload -----------------------------------------------------------------
+
+
+def test_device_payload_whole() -> None:
+    mapping = make_mapping({"level": {"name": "Level", "address": 0, "unit": "m"}})
+    payload = build_device_discovery(_device(mapping), TOPICS, ORIGIN)
+    assert payload == {
+        "device": {
+            "identifiers": ["modbus_dev"],
+            "manufacturer": "Test",
+            "model": "T1",
+            "name": "Test device",
+            "via_device": "modbus_bridge",
+        },
+        "origin": {
+            "name": "modbus-mqtt-bridge",
+            "sw_version": "test",
+            "support_url": "https://github.com/modbus-mqtt-bridge/modbus-mqtt-bridge",
+        },
+        "availability": AVAILABILITY,
+        "availability_mode": "all",
+        "cmps": {
+            "level": _ids("sensor", "level")
+            | {"name": "Level", "enabled_by_default": True}
+            | _state("level")
+            | {"unit_of_measurement": "m", "suggested_display_precision": 0}
+            | {"expire_after": 602},
+        },
+    }
+
+
+def test_origin_defaults_to_the_package_version() -> None:
+    assert Origin().sw_version == bridge.__version__
+    assert Origin().name == "modbus-mqtt-bridge"
+
+
+def test_device_mode_is_one_retained_message_of_the_payload() -> None:
+    device = _device(make_mapping({"level": {"name": "Level", "address": 0}}))
+    [message] = build_discovery(device, TOPICS, ORIGIN, mode="device")
+    assert message.topic == "homeassistant/device/dev/config"
+    assert message.retain is True
+    assert json.loads(message.payload) == build_device_discovery(device, TOPICS, ORIGIN)
+    celsius = _device(make_mapping({"t": {"name": "T", "address": 0, "unit": "°C"}}))
+    [message] = build_discovery(celsius, TOPICS, ORIGIN, mode="device")
+    assert '"unit_of_measurement":"°C"' in message.payload  # UTF-8 as is, compact
+
+
+def test_removal_is_an_empty_retained_message() -> None:
+    assert removal("homeassistant/device/dev/config") == Publish(
+        "homeassistant/device/dev/config", "", retain=True
+    )
+
+
+def test_default_entity_id_is_a_slug_of_the_device_id() -> None:
+    config = _one({}, id="borehole-pump")
+    assert config is not None
+    assert config["default_entity_id"] == "sensor.borehole_pump_value"
+    assert config["unique_id"] == "modbus_borehole-pump_value"
+    assert "object_id" not in config
+
+
+# --- read-only platforms ------------------------------------------------------------------
+
+
+def test_numeric_sensor() -> None:
+    entity = {
+        "scale": 0.1,
+        "unit": "bar",
+        "ha": {"device_class": "pressure", "state_class": "measurement", "icon": "mdi:gauge"},
+    }
+    assert _one(entity) == _ids("sensor") | {
+        "name": "Value",
+        "enabled_by_default": True,
+        "icon": "mdi:gauge",
+    } | _state() | {
+        "device_class": "pressure",
+        "state_class": "measurement",
+        "unit_of_measurement": "bar",
+        "suggested_display_precision": 1,
+        "expire_after": 602,
+    }
+
+
+@pytest.mark.parametrize(
+    ("entity", "precision"),
+    [
+        ({"scale": 0.01}, 2),
+        ({"precision": 3}, 3),
+        ({"scale": 0.01, "ha": {"display_precision": 1}}, 1),
+        ({"type": "f32"}, None),
+        ({"type": "f32", "ha": {"display_precision": 2}}, 2),
+    ],
+)
+def test_display_precision(entity: dict[str, Any], precision: int | None) -> None:
+    config = _one(entity)
+    assert config is not None
+    assert config.get("suggested_display_precision") == precision
+
+
+def test_unit_read_from_a_register() -> None:
+    entities = {
+        "unit": {"name": "Unit", "address": 1, "enum": {0: "bar", 1: "psi"}},
+        "value": {"name": "Value", "address": 0, "unit_from": "unit", "scale": 0.1},
+    }
+    assert "unit_of_measurement" not in _cmps(entities)["value"]
+    assert _cmps(entities, units={"value": "psi"})["value"]["unit_of_measurement"] == "psi"
+
+
+def test_enum_sensor_has_options_and_no_unit_or_state_class() -> None:
+    config = _one({"enum": {0: "off", 1: "on", 7: "fault"}})
+    assert config == _ids("sensor") | {"name": "Value", "enabled_by_default": True} | _state() | {
+        "device_class": "enum",
+        "options": ["off", "on", "fault"],
+        "expire_after": 602,
+    }
+
+
+def test_text_sensor() -> None:
+    config = _one({"type": "ascii", "count": 4, "poll": "once"})
+    assert config == _ids("sensor") | {"name": "Value", "enabled_by_default": True} | _state() | {
+        "expire_after": 660
+    }
+
+
+def test_binary_sensor_alarm_is_a_problem() -> None:
+    config = _one({"bit": 3, "alarm": True})
+    assert config == _ids("binary_sensor") | {
+        "name": "Value",
+        "enabled_by_default": True,
+    } | _state() | {"payload_on": "True", "payload_off": "False", "device_class": "problem"} | {
+        "expire_after": 602
+    }
+
+
+def test_binary_sensor_keeps_its_device_class() -> None:
+    config = _one({"bit": 0, "ha": {"device_class": "running"}})
+    assert config is not None
+    assert config["device_class"] == "running"
+    plain = _one({"bit": 0})
+    assert plain is not None
+    assert "device_class" not in plain
+
+
+@pytest.mark.parametrize(
+    ("entity", "expire"),
+    [
+        ({}, 602),  # fast: 2 * 300 + 2
+        ({"poll": "slow"}, 660),
+        ({"poll": "once"}, 660),
+    ],
+)
+def test_expire_after_outlives_two_state_refreshes(entity: dict[str, Any], expire: int) -> None:
+    config = _one(entity)
+    assert config is not None
+    assert config["expire_after"] == expire
+    refreshed = _one(entity, state_refresh=60.0, fast_interval=1.0, slow_interval=30.0)
+    assert refreshed is not None
+    assert refreshed["expire_after"] == {602: 121, 660: 150}[expire]
+
+
+def test_entity_category_and_enabled_by_default() -> None:
+    diagnostic = _one({"ha": {"entity_category": "diagnostic"}})
+    assert diagnostic is not None
+    assert (diagnostic["entity_category"], diagnostic["enabled_by_default"]) == (
+        "diagnostic",
+        False,
+    )
+    low = _one({"confidence": "low", "ha": {"enabled": False}})
+    assert low is not None
+    assert "entity_category" not in low
+    assert low["enabled_by_default"] is False
+
+
+# --- commanding platforms -----------------------------------------------------------------
+
+
+def test_number() -> None:
+    entity = {
+        "access": "rw",
+        "scale": 0.1,
+        "min": 0.5,
+        "max": 10,
+        "unit": "bar",
+        "ha": {"device_class": "pressure", "entity_category": "config"},
+    }
+    assert _one(entity) == _ids("number") | {
+        "name": "Value",
+        "entity_category": "config",
+        "enabled_by_default": True,
+        "command_topic": "modbus/dev/value/set",
+    } | _state() | {
+        "min": 0.5,
+        "max": 10.0,
+        "step": 0.1,
+        "mode": "box",
+        "unit_of_measurement": "bar",
+        "device_class": "pressure",
+    }
+
+
+@pytest.mark.parametrize(
+    ("entity", "limits", "bounds"),
+    [
+        ({"min": 10, "max": 50}, {}, (10.0, 50.0)),
+        ({"min": 10, "max": 50}, {"value": (20.0, 40.0)}, (20.0, 40.0)),
+        ({"min": 10, "max": 50}, {"value": (None, 40.0)}, (10.0, 40.0)),
+        ({"min": 10, "max": 50}, {"value": (45.0, 30.0)}, (10.0, 50.0)),  # contradictory
+        ({}, {}, (0, 65535)),
+        ({"scale": 0.1}, {}, (0.0, 6553.5)),
+        ({"type": "s16", "scale": 0.01}, {}, (-327.68, 327.67)),
+        ({"scale": -1}, {}, (-65535, 0)),
+        ({"bit": 4, "width": 4}, {}, (0, 15)),
+    ],
+)
+def test_number_range(
+    entity: dict[str, Any], limits: dict[str, Any], bounds: tuple[float, float]
+) -> None:
+    config = _one({"access": "rw"} | entity, limits=limits)
+    assert config is not None
+    assert (config["min"], config["max"]) == bounds
+
+
+def test_number_range_with_a_sign_bit() -> None:
+    entities = {
+        "sign": {"name": "Sign", "address": 1, "bit": 0, "access": "rw"},
+        "value": {"name": "Value", "address": 0, "access": "rw", "sign_from": "sign"},
+    }
+    config = _cmps(entities)["value"]
+    assert (config["min"], config["max"]) == (-65535, 65535)
+
+
+def test_number_step_and_mode() -> None:
+    config = _one({"access": "rw", "scale": 0.5, "step": 2, "ha": {"mode": "slider"}})
+    assert config is not None
+    assert (config["step"], config["mode"]) == (2.0, "slider")
+    assert "expire_after" not in config
+
+
+def test_select() -> None:
+    config = _one({"access": "rw", "enum": {0: "auto", 1: "manual"}})
+    assert config == _ids("select") | {
+        "name": "Value",
+        "enabled_by_default": True,
+        "command_topic": "modbus/dev/value/set",
+    } | _state() | {"options": ["auto", "manual"]}
+
+
+def test_switch() -> None:
+    config = _one({"access": "rw", "type": "bool", "ha": {"device_class": "outlet"}})
+    assert config == _ids("switch") | {
+        "name": "Value",
+        "enabled_by_default": True,
+        "command_topic": "modbus/dev/value/set",
+    } | _state() | {
+        "payload_on": "ON",
+        "payload_off": "OFF",
+        "state_on": "True",
+        "state_off": "False",
+        "device_class": "outlet",
+    }
+
+
+def test_button() -> None:
+    config = _one({"access": "w", "press": 1, "ha": {"device_class": "restart"}})
+    assert config == _ids("button") | {
+        "name": "Value",
+        "enabled_by_default": True,
+        "command_topic": "modbus/dev/value/set",
+        "payload_press": "PRESS",
+        "device_class": "restart",
+    }
+
+
+def test_text() -> None:
+    config = _one({"access": "rw", "type": "ascii", "count": 5})
+    assert config == _ids("text") | {
+        "name": "Value",
+        "enabled_by_default": True,
+        "command_topic": "modbus/dev/value/set",
+        "state_topic": STATE,
+        "value_template": "{{ value_json.value if value_json.value is not none else '' }}",
+        "max": 10,
+        "mode": "text",
+    }
+
+
+@pytest.mark.parametrize(
+    ("entity", "platform", "extra"),
+    [
+        ({"enum": {1: "run", 2: "stop"}}, "select", {"options": ["run", "stop"]}),
+        ({"min": 0, "max": 9}, "number", {"min": 0.0, "max": 9.0, "step": 1.0, "mode": "box"}),
+        ({"type": "bool"}, "switch", {"payload_on": "ON", "payload_off": "OFF"}),
+        ({"type": "ascii", "count": 2}, "text", {"max": 4, "mode": "text"}),
+    ],
+)
+def test_write_only_entities_have_no_state(
+    entity: dict[str, Any], platform: str, extra: dict[str, Any]
+) -> None:
+    config = _one({"access": "w"} | entity)
+    assert (
+        config
+        == _ids(platform)
+        | {
+            "name": "Value",
+            "enabled_by_default": True,
+            "command_topic": "modbus/dev/value/set",
+        }
+        | extra
+    )
+
+
+# --- what is published ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("access", ["r", "rw", "w"])
+def test_secret_entities_are_never_published(access: str) -> None:
+    assert _one({"access": access, "secret": True}) is None
+
+
+def test_dangerous_writable_entity_is_read_only_unless_allowed() -> None:
+    entity = {
+        "access": "rw",
+        "dangerous": True,
+        "unit": "Hz",
+        "min": 10,
+        "max": 60,
+        "poll": "slow",
+        "ha": {"device_class": "frequency", "entity_category": "config"},
+    }
+    assert _one(entity) == _ids("sensor") | {
+        "name": "Value",
+        "entity_category": "diagnostic",  # Home Assistant refuses config on sensors
+        "enabled_by_default": True,
+    } | _state() | {
+        "device_class": "frequency",
+        "unit_of_measurement": "Hz",
+        "suggested_display_precision": 0,
+        "expire_after": 660,
+    }
+    allowed = _one(entity, allow_dangerous_writes=True)
+    assert allowed is not None
+    assert (allowed["platform"], allowed["unique_id"]) == ("number", "modbus_dev_value")
+
+
+def test_dangerous_switch_shown_read_only_drops_the_switch_device_class() -> None:
+    config = _one(
+        {"access": "rw", "type": "bool", "dangerous": True, "ha": {"device_class": "switch"}}
+    )
+    assert config is not None
+    assert config["platform"] == "binary_sensor"
+    assert "device_class" not in config
+
+
+def test_dangerous_select_shown_read_only_is_an_enum_sensor() -> None:
+    config = _one({"access": "rw", "enum": {0: "a", 1: "b"}, "dangerous": True})
+    assert config is not None
+    assert (config["platform"], config["device_class"], config["options"]) == (
+        "sensor",
+        "enum",
+        ["a", "b"],
+    )
+
+
+def test_dangerous_write_only_entity_is_omitted_unless_allowed() -> None:
+    entity = {"access": "w", "press": 1, "dangerous": True}
+    assert _one(entity) is None
+    allowed = _one(entity, allow_dangerous_writes=True)
+    assert allowed is not None
+    assert allowed["platform"] == "button"
+
+
+def test_entities_follow_the_device_options() -> None:
+    entities = {
+        "base": {"name": "Base", "address": 0},
+        "solar": {"name": "Solar", "address": 1, "when": {"pv": "present"}},
+        "freq": {
+            "name": "Frequency",
+            "address": 2,
+            "scale": 0.1,
+            "variants": [{"when": {"pv": "present"}, "scale": 0.01}],
+        },
+    }
+    options = {
+        "pv": {"description": "PV input", "choices": ["absent", "present"], "default": "absent"}
+    }
+    plain = _cmps(entities, mapping_options=options)
+    assert sorted(plain) == ["base", "freq"]
+    assert plain["freq"]["suggested_display_precision"] == 1
+    solar = _cmps(entities, mapping_options=options, options={"pv": "present"})
+    assert sorted(solar) == ["base", "freq", "solar"]
+    assert solar["freq"]["suggested_display_precision"] == 2
+
+
+# --- status and alarms ------------------------------------------------------------------
+
+
+def test_status_component_mirrors_an_enum_status_entity() -> None:
+    entities = {
+        "state": {"name": "State", "address": 0, "enum": {0: "stop", 1: "run"}},
+        "trip": {"name": "Trip", "address": 1, "bit": 0, "alarm": True},
+    }
+    cmps = _cmps(entities, mapping_status="state")
+    assert list(cmps) == ["state", "trip", "status", "alarms"]
+    assert cmps["status"] == _ids("sensor", "status") | {
+        "name": "Status",
+        "enabled_by_default": True,
+    } | _state("status") | {
+        "device_class": "enum",
+        "options": ["stop", "run"],
+        "expire_after": 602,
+    }
+    assert cmps["alarms"] == _ids("sensor", "alarms") | {
+        "name": "Active alarms",
+        "enabled_by_default": True,
+        "icon": "mdi:alert",
+        "state_topic": STATE,
+        "value_template": "{{ (value_json.alarms | join(', ') or 'none')[:255] }}",
+        "expire_after": 602,
+    }
+
+
+def test_status_component_of_a_boolean_status_is_a_binary_sensor() -> None:
+    entities = {"running": {"name": "Running", "address": 0, "bit": 1, "poll": "slow"}}
+    status = _cmps(entities, mapping_status="running")["status"]
+    assert status == _ids("binary_sensor", "status") | {
+        "name": "Status",
+        "enabled_by_default": True,
+    } | _state("status") | {"payload_on": "True", "payload_off": "False", "expire_after": 660}
+
+
+def test_an_entity_keyed_status_is_the_status_component() -> None:
+    entities = {"status": {"name": "Drive state", "address": 0, "enum": {0: "a", 1: "b"}}}
+    cmps = _cmps(entities, mapping_status="status")
+    assert list(cmps) == ["status"]
+    assert cmps["status"]["name"] == "Drive state"
+
+
+def test_no_alarms_component_without_alarm_entities() -> None:
+    assert list(_cmps({"level": {"name": "Level", "address": 0}})) == ["level"]
+
+
+# --- entity mode and the bridge ---------------------------------------------------------
+
+
+def test_entity_mode_inlines_the_shared_options() -> None:
+    entities = {
+        "level": {"name": "Level", "address": 0},
+        "speed": {"name": "Speed", "address": 1, "access": "rw", "min": 0, "max": 5},
+    }
+    device = _device(make_mapping(entities))
+    messages = build_discovery(device, TOPICS, ORIGIN, mode="entity")
+    payload = build_device_discovery(device, TOPICS, ORIGIN)
+    shared = {k: v for k, v in payload.items() if k != "cmps"}
+    assert [m.topic for m in messages] == [
+        "homeassistant/sensor/dev/level/config",
+        "homeassistant/number/dev/speed/config",
+    ]
+    for message, (key, component) in zip(messages, payload["cmps"].items(), strict=True):
+        expected = {k: v for k, v in component.items() if k != "platform"} | shared
+        assert json.loads(message.payload) == expected, key
+        assert message.retain
+
+
+def test_bridge_device() -> None:
+    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge")
+    assert message.topic == "homeassistant/device/modbus_bridge/config"
+    assert json.loads(message.payload) == {
+        "device": {
+            "identifiers": ["modbus_bridge"],
+            "manufacturer": "modbus-mqtt-bridge",
+            "model": "Modbus MQTT bridge",
+            "name": "Modbus MQTT bridge",
+            "sw_version": "test",
+        },
+        "origin": ORIGIN.as_dict(),
+        "cmps": {
+            "connection_state": {
+                "platform": "binary_sensor",
+                "unique_id": "modbus_bridge_connection_state",
+                "default_entity_id": "binary_sensor.modbus_bridge_connection_state",
+                "name": "Connection state",
+                "qos": 1,
+                "entity_category": "diagnostic",
+                "enabled_by_default": True,
+                "device_class": "connectivity",
+                "state_topic": "modbus/bridge/state",
+                "payload_on": "online",
+                "payload_off": "offline",
+            }
+        },
+    }
+    [entity] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge", mode="entity")
+    assert entity.topic == "homeassistant/binary_sensor/modbus_bridge/connection_state/config"
+    assert "platform" not in json.loads(entity.payload)
+
+
+def test_every_device_points_to_the_bridge() -> None:
+    [bridge_message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge")
+    bridge_ids = json.loads(bridge_message.payload)["device"]["identifiers"]
+    device = build_device_discovery(
+        _device(make_mapping({"x": {"name": "X", "address": 0}})), TOPICS, ORIGIN
+    )
+    assert device["device"]["via_device"] in bridge_ids
+
+
+# --- exact snapshots --------------------------------------------------------------------
+
+
+def _pretty(data: Any) -> str:
+    return json.dumps(data, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
+
+
+def _check_snapshot(name: str, data: Any) -> None:
+    path = GOLDEN / f"{name}.json"
+    text = _pretty(data)
+    if os.environ.get("UPDATE_SNAPSHOTS") == "1":
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+        return
+    if not path.is_file():
+        pytest.fail(f"no snapshot {path}: run UPDATE_SNAPSHOTS=1 pytest {__file__}")
+    stored = path.read_text(encoding="utf-8")
+    if stored != text:
+        diff = difflib.unified_diff(
+            stored.splitlines(), text.splitlines(), str(path), "built now", lineterm=""
+        )
+        pytest.fail("discovery differs from the snapshot:\n" + "\n".join(diff), pytrace=False)
+
+
+def _shipped(name: str) -> DeviceInfo:
+    return DeviceInfo(
+        id=name,
+        name=name,
+        mapping=load_mapping(builtin_mapping_path(name)),
+        options={},
+        bus="rs485",
+        unit=1,
+        allow_dangerous_writes=False,
+        fast_interval=2.0,
+        slow_interval=60.0,
+    )
+
+
+@pytest.mark.parametrize("name", builtin_mapping_names())
+def test_shipped_mapping_snapshot(name: str) -> None:
+    _check_snapshot(name, build_device_discovery(_shipped(name), TOPICS, ORIGIN))
+
+
+def test_bridge_snapshot() -> None:
+    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge")
+    _check_snapshot("bridge", json.loads(message.payload))
+
+
+SAMPLE_ENTITIES: dict[str, dict[str, Any]] = {
+    "pressure": {
+        "name": "Pressure",
+        "address": 0,
+        "scale": 0.1,
+        "unit": "bar",
+        "ha": {"device_class": "pressure", "state_class": "measurement"},
+    },
+    "state": {"name": "State", "address": 1, "enum": {0: "stopped", 1: "running"}},
+    "overload": {"name": "Overload", "address": 2, "bit": 0, "alarm": True},
+    "serial": {
+        "name": "Serial number",
+        "address": 3,
+        "type": "ascii",
+        "count": 4,
+        "poll": "once",
+        "ha": {"entity_category": "diagnostic"},
+    },
+    "setpoint": {
+        "name": "Setpoint",
+        "address": 10,
+        "access": "rw",
+        "scale": 0.1,
+        "min": 0,
+        "max": 16,
+        "unit": "bar",
+        "ha": {"device_class": "pressure", "entity_category": "config"},
+    },
+    "mode": {"name": "Mode", "address": 11, "access": "rw", "enum": {0: "auto", 1: "manual"}},
+    "run": {"name": "Run", "address": 12, "access": "rw", "type": "bool"},
+    "label": {"name": "Label", "address": 13, "access": "rw", "type": "ascii", "count": 4},
+    "command": {"name": "Command", "address": 20, "access": "w", "enum": {1: "start", 2: "stop"}},
+    "reset": {"name": "Reset", "address": 21, "access": "w", "press": 1},
+    "baudrate": {
+        "name": "Baud rate",
+        "address": 22,
+        "access": "rw",
+        "dangerous": True,
+        "enum": {0: "9600", 1: "19200"},
+        "ha": {"entity_category": "config"},
+    },
+}
+
+
+def test_entity_mode_snapshot() -> None:
+    mapping = make_mapping(SAMPLE_ENTITIES, status="state")
+    messages = build_discovery(
+        _device(mapping, id="sample", name="Sample"), TOPICS, ORIGIN, mode="entity"
+    )
+    _check_snapshot(
+        "entity_mode_sample",
+        [
+            {"topic": m.topic, "retain": m.retain, "payload": json.loads(m.payload)}
+            for m in messages
+        ],
+    )

@@ -1,0 +1,229 @@
+"""Validate the discovery snapshots with Home Assistant's own MQTT discovery code.
+
+Not run by the test suite: Home Assistant is a large install that needs Python 3.13+.
+Run it with the Python of a virtualenv that has Home Assistant:
+
+    python3.13 -m venv /tmp/havenv && /tmp/havenv/bin/pip install homeassistant
+    /tmp/havenv/bin/python tools/check_ha_discovery.py [tests/golden/discovery/X.json ...]
+
+For each snapshot (default: every file in tests/golden/discovery/) it checks:
+- a device payload against DEVICE_DISCOVERY_SCHEMA (device, origin, availability, cmps
+  with platform and unique_id), and the discovery topic against HA's topic pattern;
+- every component, merged the way HA merges a device payload (device, origin and the
+  shared options copied in), against its platform's DISCOVERY_SCHEMA: the device_class,
+  unit, state_class and options combinations of sensors, number min/max, text length...;
+- options HA would silently drop (its discovery schemas remove unknown keys);
+- rules HA applies only when the entity is added: entity_category config on a sensor,
+  sensor state_class vs device_class, number unit vs device_class, the domain of
+  default_entity_id, unique_id collisions, via_device naming the bridge device;
+- every value_template, rendered by HA's template engine on a sample state document,
+  gives a state the component accepts (payload_on/off, an option, a number in range).
+Exit status 1 when anything is wrong; each problem is printed as ``file: key: message``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import json
+import sys
+import tempfile
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+try:  # Home Assistant validates with probatio since 2026.3, with voluptuous before
+    import probatio as schema_lib  # type: ignore[import-not-found]
+except ImportError:
+    import voluptuous as schema_lib  # type: ignore[import-not-found, no-redef]
+
+from homeassistant.components.mqtt import const as mqtt_const  # type: ignore[import-not-found]
+from homeassistant.components.mqtt import discovery, schemas  # type: ignore[import-not-found]
+from homeassistant.components.number import const as number_const  # type: ignore[import-not-found]
+from homeassistant.components.sensor import DEVICE_CLASS_STATE_CLASSES  # type: ignore[import-not-found]
+from homeassistant.const import __version__ as ha_version  # type: ignore[import-not-found]
+from homeassistant.core import HomeAssistant  # type: ignore[import-not-found]
+from homeassistant.helpers.template import Template  # type: ignore[import-not-found]
+
+GOLDEN = Path(__file__).resolve().parent.parent / "tests" / "golden" / "discovery"
+PREFIX = "homeassistant"
+READ_ONLY = ("sensor", "binary_sensor")
+# default_entity_id came with Home Assistant 2025.10; older versions drop it (and derive
+# the entity id from the names), which is expected, so it is reported once, not per entity.
+KNOWS_DEFAULT_ENTITY_ID = hasattr(mqtt_const, "CONF_DEFAULT_ENTITY_ID")
+
+
+class Checker:
+    def __init__(self, hass: HomeAssistant) -> None:
+        self.hass = hass
+        self.problems: list[str] = []
+        self.unique_ids: Counter[tuple[str, str]] = Counter()
+        self.via_devices: set[str] = set()
+        self.identifiers: set[str] = set()
+        self.components = 0
+
+    def problem(self, where: str, message: str) -> None:
+        self.problems.append(f"{where}: {message}")
+
+    def check_file(self, path: Path) -> None:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if isinstance(data, list):  # entity mode: [{topic, retain, payload}]
+            for message in data:
+                self.check_entity_message(path.name, message)
+        else:
+            self.check_device_payload(path.name, f"{PREFIX}/device/{path.stem}/config", data)
+
+    def check_topic(self, where: str, topic: str) -> None:
+        if not discovery.TOPIC_MATCHER.match(topic.removeprefix(f"{PREFIX}/")):
+            self.problem(where, f"HA does not accept the discovery topic {topic!r}")
+
+    def check_device_payload(self, where: str, topic: str, payload: dict[str, Any]) -> None:
+        self.check_topic(where, topic)
+        payload = json.loads(json.dumps(payload))
+        discovery._replace_all_abbreviations(payload)  # "cmps" is short for "components"
+        try:
+            validated = schemas.DEVICE_DISCOVERY_SCHEMA(json.loads(json.dumps(payload)))
+            validate = getattr(schemas, "validate_device_discovery_components", None)
+            if validate is not None:
+                validate(validated)
+        except schema_lib.Invalid as exc:
+            self.problem(where, f"device payload refused: {exc}")
+            return
+        self.identifiers.update(payload["device"].get("identifiers", []))
+        if "via_device" in payload["device"]:
+            self.via_devices.add(payload["device"]["via_device"])
+        shared = {k: payload[k] for k in schemas.SHARED_OPTIONS if k in payload}
+        for key, component in payload["components"].items():
+            config = {k: v for k, v in component.items() if k != "platform"}
+            config = {"device": payload["device"], "origin": payload["origin"]} | config
+            for option, value in shared.items():
+                config.setdefault(option, value)
+            self.check_component(f"{where}: {key}", component["platform"], config)
+
+    def check_entity_message(self, where: str, message: dict[str, Any]) -> None:
+        topic = message["topic"]
+        self.check_topic(where, topic)
+        platform = topic.removeprefix(f"{PREFIX}/").split("/")[0]
+        if not message.get("retain"):
+            self.problem(f"{where}: {topic}", "discovery configs are retained")
+        self.check_component(f"{where}: {topic}", platform, message["payload"])
+
+    def check_component(self, where: str, platform: str, config: dict[str, Any]) -> None:
+        self.components += 1
+        module = importlib.import_module(f"homeassistant.components.mqtt.{platform}")
+        try:
+            validated = module.DISCOVERY_SCHEMA(json.loads(json.dumps(config)))
+        except schema_lib.Invalid as exc:
+            self.problem(where, f"{platform} refused: {exc}")
+            return
+        dropped = sorted(set(config) - set(validated))
+        if not KNOWS_DEFAULT_ENTITY_ID and "default_entity_id" in dropped:
+            dropped.remove("default_entity_id")
+            validated["default_entity_id"] = config["default_entity_id"]
+        if dropped:
+            self.problem(where, f"{platform} ignores {', '.join(dropped)}")
+        self.check_entity_rules(where, platform, validated)
+        self.check_template(where, platform, validated)
+
+    def check_entity_rules(self, where: str, platform: str, config: dict[str, Any]) -> None:
+        self.unique_ids[(platform, str(config.get("unique_id")))] += 1
+        category = config.get("entity_category")
+        if platform in READ_ONLY and category is not None and str(category) == "config":
+            self.problem(where, f"a {platform} cannot have entity_category config")
+        domain = str(config.get("default_entity_id", f"{platform}.")).partition(".")[0]
+        if domain != platform:
+            self.problem(where, f"default_entity_id is in domain {domain}, not {platform}")
+        if "object_id" in config:
+            self.problem(where, "object_id is deprecated: use default_entity_id")
+        device_class = config.get("device_class")
+        state_class = config.get("state_class")
+        if platform == "sensor" and device_class and state_class:
+            allowed = DEVICE_CLASS_STATE_CLASSES.get(device_class)
+            if allowed is not None and state_class not in allowed:
+                self.problem(where, f"state_class {state_class} impossible for {device_class}")
+        if platform == "number" and device_class:
+            units = number_const.DEVICE_CLASS_UNITS.get(device_class)
+            unit = config.get("unit_of_measurement")
+            if units is not None and unit not in units:
+                self.problem(where, f"number unit {unit!r} is not one of {device_class}'s")
+
+    def check_template(self, where: str, platform: str, config: dict[str, Any]) -> None:
+        if "value_template" not in config:
+            return
+        text = config["value_template"].template
+        key = text.split("value_json.")[1].split()[0].rstrip("|")
+        for sample in _samples(platform, config):
+            document = {key: sample, "alarms": ["fault_a", "fault_b"]}
+            rendered = Template(text, self.hass).async_render_with_possible_json_value(
+                json.dumps(document), ""
+            )
+            message = _refusal(platform, config, str(rendered), sample)
+            if message:
+                self.problem(where, f"{text} on {sample!r} renders {rendered!r}: {message}")
+
+    def finish(self) -> None:
+        for (platform, unique_id), count in self.unique_ids.items():
+            if count > 1:
+                self.problem("all", f"{platform} unique_id {unique_id} used {count} times")
+        for via in sorted(self.via_devices - self.identifiers):
+            self.problem("all", f"via_device {via!r} names no device of the snapshots")
+
+
+def _samples(platform: str, config: dict[str, Any]) -> list[Any]:
+    """Values the state document may hold for a component (null = unknown)."""
+    if platform in ("binary_sensor", "switch"):
+        return [True, False, None]
+    if config.get("options"):
+        return [config["options"][0], None]
+    if platform == "number":
+        return [config["min"], config["max"], None]
+    if platform == "text":
+        return ["ABC", None]
+    if config.get("unit_of_measurement") or config.get("state_class"):
+        return [12.5, None]
+    return ["ABC", 7, None]
+
+
+def _refusal(platform: str, config: dict[str, Any], rendered: str, sample: Any) -> str | None:
+    """Why the component would refuse the rendered state (None when it is accepted)."""
+    if config["value_template"].template.startswith("{{ (value_json.alarms"):
+        return None if rendered == "fault_a, fault_b" else "expected the joined alarm list"
+    if sample is None:
+        ok = rendered in ("None", "") if platform != "text" else rendered == ""
+        return None if ok else "unknown must render None (or '' for text)"
+    if platform == "binary_sensor":
+        ok = rendered in (config["payload_on"], config["payload_off"])
+        return None if ok else "neither payload_on nor payload_off"
+    if platform == "switch":
+        ok = rendered in (config.get("state_on"), config.get("state_off"))
+        return None if ok else "neither state_on nor state_off"
+    if config.get("options"):
+        return None if rendered in config["options"] else "not one of the options"
+    if platform == "number":
+        return None if config["min"] <= float(rendered) <= config["max"] else "out of range"
+    return None if rendered == str(sample) else "changed on the way"
+
+
+async def main(paths: list[Path]) -> int:
+    hass = HomeAssistant(tempfile.mkdtemp(prefix="check_ha_discovery"))
+    checker = Checker(hass)
+    try:
+        for path in paths:
+            checker.check_file(path)
+        checker.finish()
+    finally:
+        await hass.async_stop(force=True)
+    for line in checker.problems:
+        print(line)
+    if not KNOWS_DEFAULT_ENTITY_ID:
+        print(f"note: Home Assistant {ha_version} ignores default_entity_id (added in 2025.10)")
+    print(
+        f"Home Assistant {ha_version}: {len(paths)} files, {checker.components} components, "
+        f"{len(checker.problems)} problems"
+    )
+    return 1 if checker.problems else 0
+
+
+if __name__ == "__main__":
+    files = [Path(a) for a in sys.argv[1:]] or sorted(GOLDEN.glob("*.json"))
+    sys.exit(asyncio.run(main(files)))
