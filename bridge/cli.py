@@ -6,6 +6,7 @@ Exit codes: 0 success, 2 invalid input (the message names file, entity or path, 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
 import sys
 from collections.abc import Sequence
@@ -24,6 +25,7 @@ from bridge.core.mapping import (
     resolve_mapping_path,
 )
 from bridge.errors import InputError
+from bridge.lifecycle import configure_logging, until_stopped
 
 EXIT_OK = 0
 EXIT_INVALID = 2
@@ -77,8 +79,21 @@ def _parser() -> argparse.ArgumentParser:
     validate = actions.add_parser("validate", help="validate mapping files")
     validate.add_argument("files", nargs="+", type=Path, metavar="FILE")
     validate.set_defaults(handler=_validate)
+    run = commands.add_parser("run", help="run the bridge: poll devices, publish to MQTT")
+    run.add_argument("-c", "--config", type=Path, required=True, metavar="FILE")
+    run.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
+    run.set_defaults(handler=_run)
     simulate_cli.add_parser(commands)
     return parser
+
+
+def _run(args: argparse.Namespace, _: TextIO) -> int:
+    from bridge.app import Bridge  # noqa: PLC0415 - the MQTT stack loads only for `run`
+
+    loaded = load_config(args.config)
+    configure_logging(args.log_level)
+    asyncio.run(until_stopped(Bridge(loaded).run()))
+    return EXIT_OK
 
 
 def _check(args: argparse.Namespace, out: TextIO) -> int:

@@ -1,0 +1,362 @@
+"""The bridge: the Modbus engine and the MQTT session wired together.
+
+``Bridge(loaded).run()`` runs one TaskGroup: the engine (every bus and device) and the
+MQTT session, which reconnects by itself. Every (re)connect subscribes to the command
+topics, clears retained discovery configs the bridge no longer produces, publishes
+discovery and the whole state. Pollers report changes; a publisher sends the device's
+JSON, the changed plain values and its availability. Commands run per device in arrival
+order, each with an expiry: one that could not run in time is dropped with an error,
+never executed late; anything refused or failing goes to ``<base>/<device>/error``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections import deque
+from typing import Any
+
+from bridge import __version__
+from bridge.config import LoadedConfig
+from bridge.core.codec import limits_of, unit_of
+from bridge.core.commands import Command, RecentMessages, parse_get, parse_set
+from bridge.core.discovery import (
+    DeviceInfo,
+    Origin,
+    Publish,
+    build_bridge_discovery,
+    build_discovery,
+    removal,
+)
+from bridge.core.entity import PollClass
+from bridge.core.state import plain_payload, published, state_document
+from bridge.core.topics import Action, Topics
+from bridge.errors import BridgeError, MissingDataError, ValueRejectedError
+from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DevicePoller, DeviceUpdate
+from bridge.mqtt.client import Message, MqttClient, MqttError, run_with_reconnect
+
+log = logging.getLogger(__name__)
+OUTBOX = 200  # non-retained messages kept while the broker is away
+
+
+class Bridge:
+    """One config's buses and devices, published over one MQTT connection."""
+
+    def __init__(self, loaded: LoadedConfig) -> None:
+        config = loaded.config
+        self.loaded = loaded
+        self.mqtt = config.mqtt
+        self.topics = Topics(config.mqtt.base_topic, config.mqtt.discovery_prefix)
+        self.origin = Origin(sw_version=__version__)
+        self.engine = Engine(loaded, self._on_update)
+        self._wake = asyncio.Event()
+        self._dirty: dict[str, set[str]] = {}
+        self._outbox: deque[Publish] = deque(maxlen=OUTBOX)
+        self._availability: dict[str, str] = {}
+        self._discovery: dict[str, list[Publish]] = {}
+        self._recent = RecentMessages(window=max(60.0, 10 * self.mqtt.command_expiry))
+        self._locks: dict[str, asyncio.Lock] = {}
+        self._group: asyncio.TaskGroup | None = None
+
+    # --- running ----------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Run until cancelled."""
+        async with asyncio.TaskGroup() as group:
+            self._group = group
+            group.create_task(self.engine.run(), name="engine")
+            group.create_task(
+                run_with_reconnect(self.mqtt, self.topics.bridge_state, self._session),
+                name="mqtt",
+            )
+
+    async def _session(self, client: MqttClient) -> None:
+        """One connection: subscribe, clean up, publish everything, then serve."""
+        await client.subscribe(*self.topics.command_filters(), qos=max(1, self.mqtt.qos))
+        await self._publish_discovery(client, clear_stale=True)
+        await self._publish_everything(client)
+        try:
+            async with asyncio.TaskGroup() as group:
+                group.create_task(self._publisher(client))
+                group.create_task(self._refresher(client))
+                async for message in client.messages():
+                    await self._handle(client, message)
+        except ExceptionGroup as failed:
+            raise _first(failed) from None
+
+    async def _publisher(self, client: MqttClient) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            await self._flush(client)
+
+    async def _refresher(self, client: MqttClient) -> None:
+        while True:
+            await asyncio.sleep(self.mqtt.state_refresh)
+            await self._publish_everything(client)
+
+    # --- state ------------------------------------------------------------------------
+
+    def _on_update(self, update: DeviceUpdate) -> None:
+        self._dirty.setdefault(update.device_id, set()).update(update.changed)
+        self._wake.set()
+
+    async def _flush(self, client: MqttClient) -> None:
+        dirty, self._dirty = self._dirty, {}
+        devices_changed = False
+        for device_id, keys in dirty.items():
+            poller = self.engine.devices[device_id]
+            devices_changed |= await self._publish_device(client, poller, keys)
+            if keys & self._discovery_sources(poller):
+                await self._publish_discovery(client, only=device_id)
+        if devices_changed:
+            await self._publish_devices_list(client)
+        while self._outbox:
+            message = self._outbox.popleft()
+            await client.publish(message.topic, message.payload, retain=message.retain)
+
+    async def _publish_device(
+        self, client: MqttClient, poller: DevicePoller, keys: set[str]
+    ) -> bool:
+        """Publish a device's JSON, changed plain values and availability; True if the
+        availability changed."""
+        device_id = poller.device.id
+        topics = self.topics
+        mapping = poller.mapping
+        document = state_document(mapping, poller.points, poller.values)
+        if poller.values:
+            await client.publish(topics.device(device_id), json.dumps(document), retain=True)
+        for key in sorted(keys & set(published(poller.points))):
+            payload = plain_payload(poller.values.get(key))
+            await client.publish(topics.value(device_id, key), payload, retain=True)
+        availability = "online" if poller.health.online else "offline"
+        if self._availability.get(device_id) != availability:
+            self._availability[device_id] = availability
+            await client.publish(topics.availability(device_id), availability, retain=True)
+            return True
+        return False
+
+    async def _publish_everything(self, client: MqttClient) -> None:
+        self._availability.clear()
+        for poller in self.engine.devices.values():
+            await self._publish_device(client, poller, set(published(poller.points)))
+        await self._publish_devices_list(client)
+
+    async def _publish_devices_list(self, client: MqttClient) -> None:
+        listing = [
+            {
+                "id": p.device.id,
+                "name": p.device.display_name,
+                "mapping": p.device.mapping,
+                "model": f"{p.mapping.manufacturer} {p.mapping.model}",
+                "bus": p.device.bus,
+                "unit": p.device.unit,
+                "state": _availability_word(p.health.online),
+            }
+            for p in self.engine.devices.values()
+        ]
+        await client.publish(self.topics.bridge_devices, json.dumps(listing), retain=True)
+
+    # --- discovery --------------------------------------------------------------------
+
+    def _device_info(self, poller: DevicePoller) -> DeviceInfo:
+        device = poller.device
+        return DeviceInfo(
+            id=device.id,
+            name=device.display_name,
+            mapping=poller.mapping,
+            options=dict(device.options),
+            bus=device.bus,
+            unit=device.unit,
+            allow_dangerous_writes=device.allow_dangerous_writes,
+            fast_interval=poller.intervals[PollClass.FAST],
+            slow_interval=poller.intervals[PollClass.SLOW],
+        )
+
+    @staticmethod
+    def _discovery_sources(poller: DevicePoller) -> set[str]:
+        """Keys whose value changes a discovery payload (units and limits from registers)."""
+        sources: set[str] = set()
+        for point in poller.points.values():
+            for source in (point.unit_source, point.min_source, point.max_source):
+                if source is not None:
+                    sources.add(source.key)
+        return sources
+
+    def _discovery_for(self, poller: DevicePoller) -> list[Publish]:
+        units, limits = {}, {}
+        for key, point in poller.points.items():
+            if point.unit_source is not None:
+                units[key] = unit_of(point, poller.image)
+            if point.min_source is not None or point.max_source is not None:
+                with contextlib.suppress(MissingDataError):
+                    limits[key] = limits_of(point, poller.image)
+        return build_discovery(
+            self._device_info(poller),
+            self.topics,
+            self.origin,
+            mode=self.mqtt.discovery if self.mqtt.discovery != "off" else "device",
+            units=units,
+            limits=limits,
+            state_refresh=self.mqtt.state_refresh,
+        )
+
+    async def _publish_discovery(
+        self, client: MqttClient, *, clear_stale: bool = False, only: str | None = None
+    ) -> None:
+        if self.mqtt.discovery == "off":
+            return
+        bridge_messages = build_bridge_discovery(self.topics, self.origin, self.topics.base)
+        wanted: list[Publish] = [] if only else list(bridge_messages)
+        for device_id, poller in self.engine.devices.items():
+            if only is not None and device_id != only:
+                continue
+            messages = self._discovery_for(poller)
+            if only is not None and messages == self._discovery.get(device_id):
+                return  # nothing changed
+            self._discovery[device_id] = messages
+            wanted.extend(messages)
+        if clear_stale:
+            await self._clear_stale(client, {m.topic for m in wanted})
+        for message in wanted:
+            await client.publish(message.topic, message.payload, retain=True)
+
+    async def _clear_stale(self, client: MqttClient, current: set[str]) -> None:
+        """Empty the retained configs this bridge published before but no longer produces."""
+        prefix = self.topics.discovery_prefix
+        found: dict[str, bytes] = {}
+        for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
+            found |= await client.retained(pattern)
+        for topic, payload in found.items():
+            if topic not in current and payload and self._ours(payload):
+                log.info("removing stale discovery config %s", topic)
+                message = removal(topic)
+                await client.publish(message.topic, message.payload, retain=True)
+
+    def _ours(self, payload: bytes) -> bool:
+        try:
+            data = json.loads(payload)
+        except ValueError:
+            return False
+        if not isinstance(data, dict):
+            return False
+        device = data.get("device") or data.get("dev") or {}
+        identifiers = device.get("identifiers") or device.get("ids") or []
+        if isinstance(identifiers, str):
+            identifiers = [identifiers]
+        mark = f"{self.topics.base}_"
+        return any(isinstance(i, str) and i.startswith(mark) for i in identifiers)
+
+    # --- commands ---------------------------------------------------------------------
+
+    async def _handle(self, client: MqttClient, message: Message) -> None:
+        if message.topic == self.topics.ha_status:
+            if message.payload.strip() == b"online":
+                log.info("Home Assistant is online: publishing discovery and state again")
+                await self._publish_discovery(client)
+                await self._publish_everything(client)
+            return
+        target = self.topics.parse_command(message.topic)
+        if target is None:
+            return
+        now = time.monotonic()
+        if self._recent.is_duplicate(
+            message.topic, message.payload, message.mid, message.duplicate, now
+        ):
+            log.info("ignoring a redelivered duplicate on %s", message.topic)
+            return
+        try:
+            if target.action is Action.GET:
+                keys = parse_get(message.payload)
+                self._spawn(self._read_now(target.device_id, keys))
+                return
+            items = parse_set(message.payload, target.key)
+        except ValueRejectedError as exc:
+            self._error(
+                target.device_id, target.key, message.payload.decode(errors="replace"), str(exc)
+            )
+            return
+        expiry = self.mqtt.command_expiry
+        for key, value in items.items():
+            command = Command(target.device_id, key, value, now, now + expiry)
+            self._spawn(self._execute(command))
+
+    def _spawn(self, work: Any) -> None:
+        if self._group is None:
+            raise RuntimeError("the bridge is not running")
+        self._group.create_task(work)
+
+    async def _execute(self, command: Command) -> None:
+        """Run one command in arrival order for its device, or drop it with an error."""
+        poller = self.engine.devices.get(command.device_id)
+        if poller is None:
+            self._error(command.device_id, command.key, command.value, "no such device")
+            return
+        lock = self._locks.setdefault(command.device_id, asyncio.Lock())
+        async with lock:
+            left = command.expires - time.monotonic()
+            if left <= 0:
+                self._error(
+                    command.device_id,
+                    command.key,
+                    command.value,
+                    "expired: not executed within the command expiry",
+                )
+                return
+            if poller.health.online is False:
+                self._error(
+                    command.device_id,
+                    command.key,
+                    command.value,
+                    f"{command.device_id} is offline: nothing written",
+                )
+                return
+            try:
+                async with asyncio.timeout(left):
+                    await poller.write(command.key, command.value)
+            except TimeoutError:
+                self._error(
+                    command.device_id,
+                    command.key,
+                    command.value,
+                    "expired: not executed within the command expiry",
+                )
+            except BridgeError as exc:
+                self._error(command.device_id, command.key, command.value, str(exc))
+
+    async def _read_now(self, device_id: str, keys: list[str] | None) -> None:
+        poller = self.engine.devices.get(device_id)
+        if poller is None:
+            self._error(device_id, None, keys, "no such device")
+            return
+        unknown = [k for k in keys or [] if k not in poller.points]
+        if unknown:
+            self._error(device_id, None, keys, f"no such entities: {', '.join(unknown)}")
+            return
+        await poller.read_now(keys)
+        self._dirty.setdefault(device_id, set())
+        self._wake.set()
+
+    def _error(self, device_id: str, key: str | None, value: object, error: str) -> None:
+        log.info("%s %s=%r refused: %s", device_id, key, value, error)
+        payload = json.dumps({"key": key, "value": value, "error": error}, default=str)
+        self._outbox.append(Publish(self.topics.error(device_id), payload, retain=False))
+        self._wake.set()
+
+
+def _availability_word(online: bool | None) -> str:
+    return "unknown" if online is None else "online" if online else "offline"
+
+
+def _first(failed: ExceptionGroup[Exception]) -> Exception:
+    """The MQTT error that ended a session (so the reconnect loop sees it), else the group."""
+    for exc in failed.exceptions:
+        if isinstance(exc, ExceptionGroup):
+            return _first(exc)
+        if isinstance(exc, MqttError):
+            return exc
+    return failed

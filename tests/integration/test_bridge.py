@@ -1,0 +1,286 @@
+"""The whole bridge end to end: a real Mosquitto, the simulator, and `Bridge.run()`."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.app import Bridge
+from bridge.config import MqttConfig, load_config_data
+from bridge.core.entity import Table
+from bridge.mqtt.client import Message, MqttClient
+from bridge.modbus.simulator import Quirks, Simulator
+from tests.integration.harness import cancel, eventually, serving_tcp, simulator
+from tests.integration.mosquitto import Broker
+
+SEEDS = ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100")
+UNITS = {name: unit for unit, name in enumerate(SEEDS, start=1)}
+H = Table.HOLDING
+
+
+class Observer:
+    """A second MQTT client that records everything under a few filters."""
+
+    def __init__(self, client: MqttClient) -> None:
+        self.client = client
+        self.retained: dict[str, bytes] = {}
+        self.log: list[Message] = []
+
+    async def run(self) -> None:
+        async for message in self.client.messages():
+            self.log.append(message)
+            self.retained[message.topic] = message.payload
+
+    def json(self, topic: str) -> Any:
+        return json.loads(self.retained[topic])
+
+    def after(self, index: int, topic: str) -> list[Message]:
+        return [m for m in self.log[index:] if m.topic == topic]
+
+
+@contextlib.asynccontextmanager
+async def observing(broker: Broker, *filters: str) -> AsyncIterator[Observer]:
+    config = MqttConfig(url=broker.url)
+    async with MqttClient(config, will_topic="observer/state", client_id="observer") as client:
+        observer = Observer(client)
+        task = asyncio.create_task(observer.run())
+        await client.subscribe(*filters)
+        try:
+            yield observer
+        finally:
+            await cancel(task)
+
+
+def bridge_config(broker: Broker, port: int, **mqtt: Any) -> Any:
+    devices = [
+        {
+            "id": name,
+            "name": name.replace("_", " ").title(),
+            "bus": "tcp",
+            "unit": unit,
+            "mapping": name,
+            "poll": {"fast": 0.5, "slow": 5},
+            "protocol": {"min_request_interval": 0.05} if name == "smartgen_hgm6100" else {},
+        }
+        for name, unit in UNITS.items()
+    ]
+    data = {
+        "mqtt": {"url": broker.url, "base_topic": "modbus", "command_expiry": 3} | mqtt,
+        "buses": [
+            {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port, "timeout": 0.5}
+        ],
+        "devices": devices,
+    }
+    return load_config_data(data, Path("e2e.yaml"))
+
+
+@contextlib.asynccontextmanager
+async def running_bridge(broker: Broker, sim: Simulator, **mqtt: Any) -> AsyncIterator[Bridge]:
+    async with serving_tcp(sim) as port:
+        bridge = Bridge(bridge_config(broker, port, **mqtt))
+        task = asyncio.create_task(bridge.run())
+        try:
+            yield bridge
+        finally:
+            await cancel(task)
+
+
+def all_units(**quirks: Any) -> Simulator:
+    return simulator(*((unit, name) for name, unit in UNITS.items()), **quirks)
+
+
+async def state_of(observer: Observer, device: str, key: str, expected: object) -> None:
+    topic = f"modbus/{device}"
+    await eventually(
+        lambda: topic in observer.retained and observer.json(topic).get(key) == expected, timeout=10
+    )
+
+
+@pytest.mark.asyncio
+async def test_discovery_availability_and_state_for_every_device(mosquitto: Broker) -> None:
+    sim = all_units()
+    async with (
+        observing(mosquitto, "modbus/#", "homeassistant/#") as observer,
+        running_bridge(mosquitto, sim) as bridge,
+    ):
+        await eventually(
+            lambda: all(
+                f"modbus/{d}/availability" in observer.retained
+                and observer.retained[f"modbus/{d}/availability"] == b"online"
+                for d in SEEDS
+            ),
+            timeout=20,
+        )
+        assert observer.retained["modbus/bridge/state"] == b"online"
+        listing = {d["id"]: d for d in observer.json("modbus/bridge/devices")}
+        await eventually(
+            lambda: all(
+                d["state"] == "online"
+                for d in json.loads(observer.retained["modbus/bridge/devices"])
+            )
+        )
+        assert set(listing) == set(SEEDS)
+        for name, unit in UNITS.items():
+            poller = bridge.engine.devices[name]
+            await eventually(
+                lambda p=poller: all(
+                    k in p.values for k, pt in p.points.items() if pt.entity.readable
+                ),
+                timeout=20,
+            )
+            config = observer.json(f"homeassistant/device/{name}/config")
+            assert config["device"]["identifiers"] == [f"modbus_{name}"]
+            assert config["origin"]["name"] == "modbus-mqtt-bridge"
+            assert config["availability_mode"] == "all"
+            for key, component in config["cmps"].items():
+                assert component["unique_id"].startswith(f"modbus_{name}_"), key
+                assert "object_id" not in component, key
+                assert component.get("state_topic", f"modbus/{name}") == f"modbus/{name}", key
+            topic = f"homeassistant/device/{name}/config"
+            await eventually(  # units and limits read from registers land in discovery
+                lambda p=poller, t=topic: (
+                    observer.json(t) == json.loads(bridge._discovery_for(p)[0].payload)
+                )
+            )
+            document = observer.json(f"modbus/{name}")
+            for key, point in poller.points.items():
+                if point.entity.readable and not point.entity.secret and key in document:
+                    assert document[key] == sim.value(unit, key), (name, key)
+            assert isinstance(document["alarms"], list)
+
+
+@pytest.mark.asyncio
+async def test_commands_round_trip_and_refusals_write_nothing(mosquitto: Broker) -> None:
+    sim = all_units()
+    async with observing(mosquitto, "modbus/#") as observer, running_bridge(mosquitto, sim):
+        await eventually(
+            lambda: (
+                observer.retained.get("modbus/vacon_nx/availability") == b"online"
+                and observer.retained.get("modbus/nastec_vasco/availability") == b"online"
+            ),
+            timeout=20,
+        )
+        publish = observer.client.publish
+        # number (plain), select (JSON /set), switch, button
+        await publish("modbus/nastec_vasco/operating_frequency/set", "42")
+        await state_of(observer, "nastec_vasco", "operating_frequency", 42)
+        await publish("modbus/soft_starter/set", json.dumps({"soft_start_mode": "ramp"}))
+        await state_of(observer, "soft_starter", "soft_start_mode", "ramp")
+        await publish("modbus/vacon_nx/run/set", "ON")
+        await state_of(observer, "vacon_nx", "run", True)
+        await publish("modbus/smartgen_hgm6100/command_auto/set", "PRESS")
+        await eventually(lambda: any(w.function == 5 for _, w in sim.writes))
+        assert sim.value(UNITS["nastec_vasco"], "operating_frequency") == 42
+        written = len(sim.writes)
+        errors_before = len(observer.log)
+        await publish("modbus/nastec_vasco/operating_frequency/set", "9999")  # out of range
+        await publish("modbus/nastec_vasco/set", "{not json")  # malformed
+        await publish("modbus/nastec_vasco/unit/set", "furlong")  # unknown label
+        await publish("modbus/nastec_vasco/modbus_address/set", "7")  # guarded
+        await publish("modbus/nowhere/set", '{"x": 1}')  # no such device
+        await eventually(
+            lambda: len(observer.after(errors_before, "modbus/nastec_vasco/error")) == 4
+        )
+        errors = [
+            json.loads(m.payload)
+            for m in observer.after(errors_before, "modbus/nastec_vasco/error")
+        ]
+        assert {e["key"] for e in errors} == {"operating_frequency", None, "unit", "modbus_address"}
+        assert all(e["error"] for e in errors)
+        await eventually(lambda: observer.after(errors_before, "modbus/nowhere/error"))
+        await asyncio.sleep(0.5)
+        assert len(sim.writes) == written
+
+
+@pytest.mark.asyncio
+async def test_get_reads_now(mosquitto: Broker) -> None:
+    sim = all_units()
+    async with observing(mosquitto, "modbus/#") as observer, running_bridge(mosquitto, sim):
+        await eventually(
+            lambda: observer.retained.get("modbus/soft_starter/availability") == b"online",
+            timeout=20,
+        )
+        sim.set_value(UNITS["soft_starter"], "phase_u_current", 77)
+        await observer.client.publish("modbus/soft_starter/get", '{"phase_u_current": ""}')
+        await state_of(observer, "soft_starter", "phase_u_current", 77)
+        await eventually(
+            lambda: observer.retained.get("modbus/soft_starter/phase_u_current") == b"77"
+        )
+
+
+@pytest.mark.asyncio
+async def test_commands_to_an_offline_device_are_refused(mosquitto: Broker) -> None:
+    sim = all_units()
+    sim.set_quirks(UNITS["vacon_nx"], Quirks(dead=True))
+    async with (
+        observing(mosquitto, "modbus/#") as observer,
+        running_bridge(mosquitto, sim) as bridge,
+    ):
+        await eventually(
+            lambda: bridge.engine.devices["vacon_nx"].health.online is False, timeout=20
+        )
+        await eventually(
+            lambda: observer.retained.get("modbus/vacon_nx/availability") == b"offline"
+        )
+        await observer.client.publish("modbus/vacon_nx/run/set", "ON")
+        await eventually(lambda: observer.after(0, "modbus/vacon_nx/error"))
+        error = json.loads(observer.after(0, "modbus/vacon_nx/error")[0].payload)
+        assert "offline" in error["error"]
+        sim.set_quirks(UNITS["vacon_nx"], Quirks())
+        await asyncio.sleep(1.0)
+        assert not [w for unit, w in sim.writes if unit == UNITS["vacon_nx"]]
+
+
+@pytest.mark.asyncio
+async def test_broker_restart_and_home_assistant_birth(mosquitto: Broker) -> None:
+    sim = all_units()
+    async with running_bridge(mosquitto, sim):
+        async with observing(mosquitto, "modbus/#", "homeassistant/#") as observer:
+            await eventually(
+                lambda: observer.retained.get("modbus/p2_vfd/availability") == b"online", timeout=20
+            )
+        mosquitto.restart()  # persistence off: every retained message is gone
+        async with observing(mosquitto, "modbus/#", "homeassistant/#") as observer:
+            await eventually(
+                lambda: (
+                    observer.retained.get("modbus/bridge/state") == b"online"
+                    and "homeassistant/device/p2_vfd/config" in observer.retained
+                    and "modbus/p2_vfd" in observer.retained
+                ),
+                timeout=30,
+            )
+            seen = len(observer.log)
+            await observer.client.publish("homeassistant/status", "online")
+            await eventually(lambda: observer.after(seen, "homeassistant/device/vacon_nx/config"))
+            await observer.client.publish("modbus/p2_vfd/set_value/set", "25")
+            await eventually(lambda: any(w.address == 0x1000 for _, w in sim.writes))
+
+
+@pytest.mark.asyncio
+async def test_stale_discovery_is_cleared_at_start(mosquitto: Broker) -> None:
+    sim = all_units()
+    stale = {
+        "device": {"identifiers": ["modbus_old_pump"], "name": "Old"},
+        "origin": {"name": "modbus-mqtt-bridge"},
+        "cmps": {},
+    }
+    foreign = {"device": {"identifiers": ["zigbee2mqtt_0x1"]}, "cmps": {}}
+    async with observing(mosquitto, "homeassistant/#") as observer:
+        await observer.client.publish(
+            "homeassistant/device/old_pump/config", json.dumps(stale), retain=True
+        )
+        await observer.client.publish(
+            "homeassistant/device/lamp/config", json.dumps(foreign), retain=True
+        )
+        async with running_bridge(mosquitto, sim):
+            await eventually(
+                lambda: observer.retained.get("homeassistant/device/old_pump/config") == b"",
+                timeout=20,
+            )
+            assert json.loads(observer.retained["homeassistant/device/lamp/config"]) == foreign
