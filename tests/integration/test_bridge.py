@@ -14,8 +14,8 @@ import pytest
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
 from bridge.core.entity import Table
-from bridge.mqtt.client import Message, MqttClient
 from bridge.modbus.simulator import Quirks, Simulator
+from bridge.mqtt.client import Message, MqttClient
 from tests.integration.harness import cancel, eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 
