@@ -13,6 +13,7 @@ import pytest
 
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
+from bridge.core.codec import limits_of
 from bridge.core.entity import Table
 from bridge.modbus.simulator import Quirks, Simulator
 from bridge.mqtt.client import Message, MqttClient
@@ -284,3 +285,72 @@ async def test_stale_discovery_is_cleared_at_start(mosquitto: Broker) -> None:
                 timeout=20,
             )
             assert json.loads(observer.retained["homeassistant/device/lamp/config"]) == foreign
+
+
+def pick_writes(poller: Any) -> dict[str, tuple[str, object]]:
+    """One safe entity per writable kind of a device, with a valid new value for it."""
+    chosen: dict[str, tuple[str, object]] = {}
+    for key, point in poller.points.items():
+        entity = point.entity
+        kind = entity.component.value
+        if kind in chosen or not entity.writable or entity.dangerous or entity.secret:
+            continue
+        current = poller.values.get(key)
+        if kind == "button":
+            chosen[kind] = (key, "PRESS")
+        elif kind == "switch" and isinstance(current, bool):
+            chosen[kind] = (key, "OFF" if current else "ON")
+        elif kind == "select" and entity.enum and current is not None:
+            others = [label for label in entity.enum.values() if label != current]
+            if others:
+                chosen[kind] = (key, others[0])
+        elif kind == "number" and isinstance(current, int | float) and entity.readable:
+            low, high = limits_of(point, poller.image)
+            step = entity.step or entity.scale
+            candidate = current + step if high is None or current + step <= high else current - step
+            if (low is None or candidate >= low) and entity.verify:
+                chosen[kind] = (key, round(candidate, entity.decimals))
+    return chosen
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("name", SEEDS)
+async def test_every_writable_kind_round_trips(mosquitto: Broker, name: str) -> None:
+    sim = all_units()
+    unit = UNITS[name]
+    async with (
+        observing(mosquitto, f"modbus/{name}/#", f"modbus/{name}") as observer,
+        running_bridge(mosquitto, sim) as bridge,
+    ):
+        poller = bridge.engine.devices[name]
+        await eventually(
+            lambda: all(k in poller.values for k, p in poller.points.items() if p.entity.readable),
+            timeout=20,
+        )
+        writes = pick_writes(poller)
+        assert writes, name
+        for kind, (key, value) in writes.items():
+            before = len(sim.writes)
+            await observer.client.publish(f"modbus/{name}/{key}/set", str(value))
+            await eventually(lambda b=before: len(sim.writes) > b, timeout=10)
+            if kind != "button" and poller.points[key].entity.readable:
+                expected = {"ON": True, "OFF": False}.get(str(value), value)
+                await eventually(lambda k=key, e=expected: sim.value(unit, k) == e)
+                await state_of(observer, name, key, expected)
+        numbers = [
+            k
+            for k, p in poller.points.items()
+            if p.entity.component.value == "number"
+            and p.entity.writable
+            and not p.entity.dangerous
+            and not p.entity.secret
+        ]
+        written = len(sim.writes)
+        seen = len(observer.log)
+        read_only = [k for k, p in poller.points.items() if not p.entity.writable]
+        target = numbers[0] if numbers else read_only[0]  # out of range, or not writable
+        await observer.client.publish(f"modbus/{name}/{target}/set", "1e12")  # out of range
+        await observer.client.publish(f"modbus/{name}/set", "not json")  # malformed
+        await eventually(lambda: len(observer.after(seen, f"modbus/{name}/error")) == 2)
+        await asyncio.sleep(0.3)
+        assert len(sim.writes) == written
