@@ -316,15 +316,7 @@ class Bridge:
                 )
                 return
             try:
-                async with asyncio.timeout(left):
-                    await poller.write(command.key, command.value)
-            except TimeoutError:
-                self._error(
-                    command.device_id,
-                    command.key,
-                    command.value,
-                    "expired: not executed within the command expiry",
-                )
+                await poller.write(command.key, command.value, deadline=command.expires)
             except BridgeError as exc:
                 self._error(command.device_id, command.key, command.value, str(exc))
 

@@ -8,6 +8,7 @@
     │   ├── MissingDataError    a register the value needs has not been read yet
     │   └── ValueRejectedError  a command value is refused (not writable, type, range,
     │                           enum label, sentinel, guard); nothing is written
+    ├── CommandExpiredError     a command could not be sent before its expiry: dropped
     └── ModbusError             a transaction did not succeed
         ├── BusError            the port or gateway is not reachable (unplugged, refused)
         ├── DeviceTimeoutError  the unit did not answer in time
@@ -57,6 +58,10 @@ class MissingDataError(CodecError):
 
 class ValueRejectedError(CodecError):
     """A command value is refused before anything reaches the wire."""
+
+
+class CommandExpiredError(BridgeError):
+    """A command could not be sent before its expiry; it was dropped, never sent late."""
 
 
 class ModbusError(BridgeError):

@@ -246,7 +246,11 @@ class DevicePoller:
             self._forget_plans()
 
     async def _submit(
-        self, request: Read | Write, priority: Priority, retries: int | None = None
+        self,
+        request: Read | Write,
+        priority: Priority,
+        retries: int | None = None,
+        deadline: float | None = None,
     ) -> tuple[int, ...]:
         if retries is None:  # reads are not resent: the next cycle reads again
             retries = 0
@@ -259,6 +263,7 @@ class DevicePoller:
                 priority=priority,
                 retries=retries,
                 protocol=self.protocol,
+                deadline=deadline,
             )
         except DeviceTimeoutError:
             self._record(Outcome.TIMEOUT)
@@ -327,8 +332,13 @@ class DevicePoller:
 
     # --- writing ------------------------------------------------------------------
 
-    async def write(self, key: str, value: object) -> Value:
-        """Validate, write ahead of polls, read back; return the value the device holds."""
+    async def write(self, key: str, value: object, *, deadline: float | None = None) -> Value:
+        """Validate, write ahead of polls, read back; return the value the device holds.
+
+        ``deadline`` (monotonic): the first write must be sent by then, else the command is
+        dropped with CommandExpiredError; the writes after it (a sign, a pulse's second
+        half) always follow, so a command is never left half done.
+        """
         point = self.points.get(key)
         if point is None:
             raise ValueRejectedError(f"{key}: no such entity on {self.device.id}")
@@ -340,9 +350,14 @@ class DevicePoller:
             self.writes.skipped_unchanged += 1
             return self.values.get(key, decode(point, self.image))
         retries = self.retries if entity.idempotent else 0
-        for write in writes:
+        for index, write in enumerate(writes):
             try:
-                await self._submit(write, Priority.WRITE, retries=retries)
+                await self._submit(
+                    write,
+                    Priority.WRITE,
+                    retries=retries,
+                    deadline=deadline if index == 0 else None,
+                )
             except ModbusError:
                 self.writes.failed += 1
                 raise

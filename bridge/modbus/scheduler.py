@@ -21,7 +21,13 @@ from enum import IntEnum
 from bridge.core.health import exception_meaning
 from bridge.core.protocol import Protocol
 from bridge.core.request import Read, Write
-from bridge.errors import BusError, DeviceExceptionError, DeviceTimeoutError, FrameError
+from bridge.errors import (
+    BusError,
+    CommandExpiredError,
+    DeviceExceptionError,
+    DeviceTimeoutError,
+    FrameError,
+)
 from bridge.modbus.transport import Transport
 
 log = logging.getLogger(__name__)
@@ -46,6 +52,7 @@ class _Job:
     retries: int = field(compare=False)
     protocol: Protocol = field(compare=False)
     future: asyncio.Future[tuple[int, ...]] = field(compare=False)
+    deadline: float | None = field(default=None, compare=False)
 
 
 @dataclass(slots=True)
@@ -87,11 +94,14 @@ class BusScheduler:
         priority: Priority = Priority.POLL,
         retries: int = 0,
         protocol: Protocol | None = None,
+        deadline: float | None = None,
     ) -> tuple[int, ...]:
         """Queue one transaction and wait for its result (or its error).
 
         ``protocol`` gives the device's own exception meanings and its minimum time
-        between two requests; ``retries`` resends after a timeout or a transmission error.
+        between two requests; ``retries`` resends after a timeout or a transmission error;
+        a job still waiting at ``deadline`` (monotonic) fails with CommandExpiredError and
+        is never sent.
         """
         future: asyncio.Future[tuple[int, ...]] = asyncio.get_running_loop().create_future()
         job = _Job(
@@ -103,6 +113,7 @@ class BusScheduler:
             retries,
             protocol or Protocol(),
             future,
+            deadline,
         )
         self._queue.append(job)
         self._wakeup.set()
@@ -148,6 +159,9 @@ class BusScheduler:
         """Run one job; a timeout or a transmission error sends it back to the queue while
         retries last, so a resend keeps the gap and the unit's pacing like any frame."""
         if job.future.done():  # the submitter gave up (cancelled)
+            return
+        if job.deadline is not None and time.monotonic() > job.deadline:
+            _settle(job, CommandExpiredError("expired: not sent within the command expiry"))
             return
         try:
             await self._ensure_open()

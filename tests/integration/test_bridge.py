@@ -354,3 +354,29 @@ async def test_every_writable_kind_round_trips(mosquitto: Broker, name: str) -> 
         await eventually(lambda: len(observer.after(seen, f"modbus/{name}/error")) == 2)
         await asyncio.sleep(0.3)
         assert len(sim.writes) == written
+
+
+@pytest.mark.asyncio
+async def test_a_command_that_cannot_run_in_time_is_dropped_not_run_late(
+    mosquitto: Broker,
+) -> None:
+    sim = all_units()
+    async with (
+        observing(mosquitto, "modbus/soft_starter/#") as observer,
+        running_bridge(mosquitto, sim, command_expiry=0.4) as bridge,
+    ):
+        starter = bridge.engine.devices["soft_starter"]
+        await eventually(lambda: starter.health.online is True, timeout=20)
+        sim.set_quirks(UNITS["soft_starter"], Quirks(latency=0.3))  # a slow device
+        seen = len(observer.log)
+        for key, value in (("soft_stop_time", 11), ("kick_start_time", 3), ("overload_time", 9)):
+            await observer.client.publish(f"modbus/soft_starter/{key}/set", str(value))
+        await eventually(lambda: observer.after(seen, "modbus/soft_starter/error"), timeout=10)
+        await asyncio.sleep(1.5)  # anything late would have been written by now
+        errors = [json.loads(m.payload) for m in observer.after(seen, "modbus/soft_starter/error")]
+        assert all("expired" in e["error"] for e in errors)
+        expired = {e["key"] for e in errors}
+        written = {w.address for u, w in sim.writes if u == UNITS["soft_starter"]}
+        addresses = {"soft_stop_time": 0x1006, "kick_start_time": 0x100C, "overload_time": 0x1012}
+        assert expired
+        assert not {addresses[k] for k in expired} & written

@@ -16,7 +16,7 @@ import pytest
 from bridge.core.entity import Table
 from bridge.core.protocol import ExceptionMeaning, Protocol
 from bridge.core.request import Read, Write
-from bridge.errors import BusError, DeviceExceptionError, DeviceTimeoutError
+from bridge.errors import BusError, CommandExpiredError, DeviceExceptionError, DeviceTimeoutError
 from bridge.modbus.scheduler import BusScheduler, Priority
 
 
@@ -168,5 +168,25 @@ async def test_a_cancelled_submission_is_not_sent() -> None:
     transport.gate.set()
     await busy
     await asyncio.sleep(0.01)
+    assert [unit for unit, _, _ in transport.calls] == [1]
+    await stop(task)
+
+
+@pytest.mark.asyncio
+async def test_a_job_still_waiting_at_its_deadline_is_never_sent() -> None:
+    transport = ScriptedTransport(gate=asyncio.Event())
+    scheduler, task = await started(transport)
+    busy = asyncio.create_task(scheduler.submit(1, READ, timeout=1))
+    await asyncio.sleep(0.01)
+    late = asyncio.create_task(
+        scheduler.submit(
+            2, WRITE, timeout=1, priority=Priority.WRITE, deadline=time.monotonic() + 0.05
+        )
+    )
+    await asyncio.sleep(0.1)  # the deadline passes while unit 1's read is in flight
+    transport.gate.set()
+    await busy
+    with pytest.raises(CommandExpiredError):
+        await late
     assert [unit for unit, _, _ in transport.calls] == [1]
     await stop(task)
