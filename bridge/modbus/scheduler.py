@@ -147,8 +147,10 @@ class BusScheduler:
             earliest = min((when for when, _ in ready_at), default=None)
             self._wakeup.clear()
             delay = None if earliest is None else max(0.0, earliest - now)
+            # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancellation
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wakeup.wait(), delay)
+                async with asyncio.timeout(delay):
+                    await self._wakeup.wait()
 
     def _unit_ready(self, job: _Job, start: float) -> float:
         last = self._unit_last.get(job.unit)

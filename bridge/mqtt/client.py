@@ -211,6 +211,7 @@ class MqttClient:
             await connection.publish(topic, payload, qos, retain)
         except aiomqtt.MqttError as exc:
             raise MqttDisconnectedError(f"publish to {topic}: {exc}") from exc
+        _restore_lost_cancel()
 
     async def subscribe(self, *filters: str, qos: int = 1) -> None:
         """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused."""
@@ -221,6 +222,7 @@ class MqttClient:
             codes = await connection.subscribe([(f, qos) for f in filters])
         except aiomqtt.MqttError as exc:
             raise MqttDisconnectedError(f"subscribe to {', '.join(filters)}: {exc}") from exc
+        _restore_lost_cancel()
         refused = [f for f, code in zip(filters, codes, strict=True) if _value(code) >= _FAILURE]
         if refused:
             raise MqttRefusedError(f"the broker refused the subscription to {', '.join(refused)}")
@@ -253,8 +255,9 @@ class MqttClient:
         try:
             await self.subscribe(topic_filter)
             while True:
-                try:
-                    received = await asyncio.wait_for(queue.get(), settle)
+                try:  # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancel
+                    async with asyncio.timeout(settle):
+                        received = await queue.get()
                 except TimeoutError:
                     break
                 found[received.topic.value] = received.payload
@@ -273,6 +276,15 @@ class MqttClient:
         except aiomqtt.MqttError as exc:
             raise MqttDisconnectedError(f"unsubscribe from {topic_filter}: {exc}") from exc
         self._filters.discard(topic_filter)
+
+
+def _restore_lost_cancel() -> None:
+    """Raise the cancellation that Python 3.11's ``asyncio.wait_for`` (used inside aiomqtt)
+    swallows when the acknowledgement and the cancel arrive together; without this a
+    stopping bridge could keep serving its MQTT session."""
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError
 
 
 def _value(code: int | Any) -> int:

@@ -91,8 +91,17 @@ async def running(engine: Engine, *, pollers: bool = True) -> AsyncIterator[Engi
             await cancel(task)
 
 
-async def cancel(task: asyncio.Task[Any]) -> None:
+async def cancel(task: asyncio.Task[Any], within: float = 10.0) -> None:
+    """Cancel a task and wait for it to end, failing clearly if it does not stop."""
     task.cancel()
+    done, _ = await asyncio.wait({task}, timeout=within)
+    if not done:
+        stacks = "".join(
+            f"  {other.get_name()}: {[f'{f.f_code.co_filename}:{f.f_lineno}' for f in other.get_stack(limit=3)]}\n"
+            for other in asyncio.all_tasks()
+            if not other.done()
+        )
+        raise AssertionError(f"task {task.get_name()} did not stop within {within} s:\n{stacks}")
     with contextlib.suppress(asyncio.CancelledError):
         await task
 
