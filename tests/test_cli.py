@@ -13,7 +13,8 @@ from bridge.cli import main
 from bridge.core.mapping import builtin_mapping_names
 
 ROOT = Path(__file__).resolve().parent.parent
-EXAMPLE = ROOT / "examples" / "config.yaml"
+EXAMPLE = ROOT / "examples" / "config.yaml"  # the five seed devices on the simulator
+SITE = ROOT / "examples" / "site.yaml"  # a hardware site: RS-485 line and a gateway
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:
@@ -30,12 +31,15 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
 def test_check_example_config_exits_0() -> None:
     result = run("check", "-c", str(EXAMPLE))
     assert result.returncode == 0, result.stderr
+    assert "ok (1 bus(es), 5 device(s)" in result.stdout
+    result = run("check", "-c", str(SITE))
+    assert result.returncode == 0, result.stderr
     assert "ok (2 bus(es), 5 device(s)" in result.stdout
 
 
 def test_check_bad_config_exits_2_naming_the_field(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
-    bad.write_text(EXAMPLE.read_text().replace("unit: 3", "unit: 0"))
+    bad.write_text(SITE.read_text().replace("unit: 3", "unit: 0"))
     result = run("check", "-c", str(bad))
     assert result.returncode == 2
     assert f"{bad}: 1 error(s)" in result.stderr
