@@ -119,13 +119,16 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
             timeout=20,
         )
         assert observer.retained["modbus/bridge/state"] == b"online"
-        listing = {d["id"]: d for d in observer.json("modbus/bridge/devices")}
         await eventually(
-            lambda: all(
-                d["state"] == "online"
-                for d in json.loads(observer.retained["modbus/bridge/devices"])
+            lambda: (
+                "modbus/bridge/devices" in observer.retained
+                and all(
+                    d["state"] == "online"
+                    for d in json.loads(observer.retained["modbus/bridge/devices"])
+                )
             )
         )
+        listing = {d["id"]: d for d in observer.json("modbus/bridge/devices")}
         assert set(listing) == set(SEEDS)
         for name, unit in UNITS.items():
             poller = bridge.engine.devices[name]
@@ -149,11 +152,16 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
                     observer.json(t) == json.loads(bridge._discovery_for(p)[0].payload)
                 )
             )
-            document = observer.json(f"modbus/{name}")
-            for key, point in poller.points.items():
-                if point.entity.readable and not point.entity.secret and key in document:
-                    assert document[key] == sim.value(unit, key), (name, key)
-            assert isinstance(document["alarms"], list)
+            keys = [
+                k for k, p in poller.points.items() if p.entity.readable and not p.entity.secret
+            ]
+            await eventually(
+                lambda n=name, u=unit, ks=keys: (
+                    f"modbus/{n}" in observer.retained
+                    and all(observer.json(f"modbus/{n}").get(k) == sim.value(u, k) for k in ks)
+                )
+            )
+            assert isinstance(observer.json(f"modbus/{name}")["alarms"], list)
 
 
 @pytest.mark.asyncio
