@@ -37,7 +37,7 @@ from bridge.core.topics import Action, Topics
 from bridge.errors import BridgeError, MissingDataError, ValueRejectedError
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
-from bridge.mqtt.client import Message, MqttClient, MqttError, run_with_reconnect
+from bridge.mqtt import Message, MqttClient, MqttError, run_with_reconnect
 
 log = logging.getLogger(__name__)
 OUTBOX = 200  # non-retained messages kept while the broker is away

@@ -14,7 +14,7 @@ import argparse
 import asyncio
 from typing import TextIO
 
-from bridge.core.mapping import load_mapping, resolve_mapping_path
+from bridge.core.mapping import Mapping, load_mapping, resolve_mapping_path
 from bridge.errors import InputError
 from bridge.lifecycle import until_stopped
 from bridge.modbus.null_modem import null_modem
@@ -99,9 +99,12 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
     if len(args.mapping) != len(args.unit):
         raise InputError("simulate", ["give one --unit after each --mapping"])
     options = dict(pair.partition("=")[::2] for pair in args.option)
+    mappings = [load_mapping(resolve_mapping_path(ref)) for ref in args.mapping]
+    problems = _option_problems(options, mappings)
+    if problems:
+        raise InputError("simulate", problems)
     units = []
-    for ref, unit in zip(args.mapping, args.unit, strict=True):
-        mapping = load_mapping(resolve_mapping_path(ref))
+    for mapping, unit in zip(mappings, args.unit, strict=True):
         mine = {k: v for k, v in options.items() if k in mapping.options}
         quirks = Quirks(
             max_read_registers=args.max_read,
@@ -117,6 +120,20 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
         return Simulator(units, seed=args.seed, tick=args.tick)
     except ValueError as exc:
         raise InputError("simulate", [str(exc)]) from None
+
+
+def _option_problems(options: dict[str, str], mappings: list[Mapping]) -> list[str]:
+    """An option no mapping has, or a value one of them does not offer, is a mistake."""
+    problems = []
+    for name, value in options.items():
+        specs = [m.options[name] for m in mappings if name in m.options]
+        if not specs:
+            known = sorted({o for m in mappings for o in m.options})
+            problems.append(f"--option {name}: no simulated mapping has it (known: {known})")
+        for spec in specs:
+            if value not in spec.choices:
+                problems.append(f"--option {name}={value}: choose from {list(spec.choices)}")
+    return problems
 
 
 def run_simulate(args: argparse.Namespace, out: TextIO) -> int:

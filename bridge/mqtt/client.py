@@ -31,19 +31,8 @@ from bridge.config import MqttConfig, TlsConfig
 from bridge.mqtt.errors import (
     MqttConnectError,
     MqttDisconnectedError,
-    MqttError,
     MqttRefusedError,
 )
-
-__all__ = [
-    "Message",
-    "MqttClient",
-    "MqttConnectError",
-    "MqttDisconnectedError",
-    "MqttError",
-    "MqttRefusedError",
-    "run_with_reconnect",
-]
 
 ONLINE = b"online"
 OFFLINE = b"offline"

@@ -85,3 +85,27 @@ def test_simulate_refuses_an_unknown_mapping() -> None:
     )
     assert result.returncode == 2
     assert "no shipped mapping of that name" in result.stderr
+
+
+def test_simulate_refuses_an_option_no_mapping_has() -> None:
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bridge.cli",
+            "simulate",
+            "--mapping",
+            "smartgen_hgm6100",
+            "--unit",
+            "1",
+            "--pty",
+            "-o",
+            "modle=hgm6110",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+    assert result.returncode == 2
+    assert "--option modle: no simulated mapping has it" in result.stderr
