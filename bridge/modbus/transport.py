@@ -18,12 +18,14 @@ from pymodbus.framer import FramerType
 from pymodbus.pdu import ExceptionResponse
 
 from bridge.config import SerialBus, TcpBus
-from bridge.core.health import STANDARD_EXCEPTIONS
+from bridge.core.health import exception_meaning
+from bridge.core.protocol import Protocol
 from bridge.core.request import Read, Write
 from bridge.errors import BusError, DeviceExceptionError, DeviceTimeoutError, FrameError
 from bridge.modbus.frame import CLIENT_RESPONSES, request_pdu, response_values
 
 _NEVER_DISCONNECT = 1 << 30
+STANDARD = Protocol()  # no device-specific exception meanings
 Client = AsyncModbusSerialClient | AsyncModbusTcpClient
 
 
@@ -75,9 +77,8 @@ class Transport:
             raise FrameError(f"unit {unit}: {exc}") from None
         if isinstance(response, ExceptionResponse):
             code = int(response.exception_code)
-            standard = STANDARD_EXCEPTIONS.get(code)
-            name = standard.name if standard else f"exception {code}"
-            raise DeviceExceptionError(code, name, standard.action if standard else "fail")
+            meaning = exception_meaning(code, STANDARD)  # the scheduler applies the device's
+            raise DeviceExceptionError(code, meaning.name, meaning.action)
         if isinstance(request, Write):
             return ()
         return response_values(response, request)
