@@ -187,8 +187,30 @@ class DeviceConfig(_Strict):
         return self.name or self.id.replace("_", " ").capitalize()
 
 
+class MetricsConfig(_Strict):
+    """The optional Prometheus/OpenMetrics endpoint (off by default)."""
+
+    enabled: bool = False
+    host: str = Field("127.0.0.1", description="address to listen on (0.0.0.0 in a container)")
+    port: int = Field(9464, ge=1, le=65535)
+
+
+class ManagementConfig(_Strict):
+    """The ``<base>/bridge/*`` management side: health reports, raw writes, metrics."""
+
+    health_interval: Duration = Field(
+        60.0, description="publish <base>/bridge/health this often; 0 turns it off"
+    )
+    allow_raw_writes: bool = Field(
+        False, description="permit bridge/request/device/write (raw register writes)"
+    )
+    scan_timeout: Duration = Field(0.2, description="per-unit answer timeout of device/scan")
+    metrics: MetricsConfig = MetricsConfig()
+
+
 class Config(_Strict):
     mqtt: MqttConfig = MqttConfig()
+    bridge: ManagementConfig = ManagementConfig()
     buses: list[Bus] = Field(min_length=1)
     devices: list[DeviceConfig] = Field(default_factory=list)
 
