@@ -2,6 +2,10 @@
 
 <base>/bridge/state              online/offline (retained, also the LWT)
 <base>/bridge/devices            JSON list of devices (retained)
+<base>/bridge/info               version, config without secrets, schemas, mappings (retained)
+<base>/bridge/health             per bus and per device counters (periodic)
+<base>/bridge/request/<cmd>      management request: JSON with an optional transaction
+<base>/bridge/response/<cmd>     {status, data, error, transaction}
 <base>/<device>                  JSON of every value by key (retained)
 <base>/<device>/<key>            the plain value (retained)
 <base>/<device>/availability     online/offline (retained)
@@ -47,6 +51,32 @@ class Topics:
     @property
     def bridge_devices(self) -> str:
         return f"{self.base}/bridge/devices"
+
+    @property
+    def bridge_info(self) -> str:
+        return f"{self.base}/bridge/info"
+
+    @property
+    def bridge_health(self) -> str:
+        return f"{self.base}/bridge/health"
+
+    @property
+    def bridge_requests(self) -> str:
+        """Subscription filter for every management request."""
+        return f"{self.base}/bridge/request/#"
+
+    def bridge_request(self, command: str) -> str:
+        return f"{self.base}/bridge/request/{command}"
+
+    def bridge_response(self, command: str) -> str:
+        return f"{self.base}/bridge/response/{command}"
+
+    def parse_request(self, topic: str) -> str | None:
+        """The management command of a request topic (``device/read``), else None."""
+        prefix = f"{self.base}/bridge/request/"
+        if not topic.startswith(prefix) or topic == prefix:
+            return None
+        return topic[len(prefix) :]
 
     @property
     def ha_status(self) -> str:
