@@ -92,9 +92,17 @@ def f32_value(raw: bytes) -> float | str:
         return "inf" if value > 0 else "-inf"
     for digits in range(1, _SIGNIFICANT_DIGITS_F32 + 1):
         candidate = float(f"{value:.{digits}g}")
-        if struct.pack(">f", candidate) == raw:
+        if _float32(candidate) == raw:
             return candidate
     return float(value)  # pragma: no cover - 9 significant digits always read back
+
+
+def _float32(value: float) -> bytes | None:
+    """``value`` packed as a big-endian float32; None when rounding took it out of range."""
+    try:
+        return struct.pack(">f", value)
+    except OverflowError:
+        return None
 
 
 def _word(address: int, word: int) -> dict[str, Any]:
