@@ -2,18 +2,21 @@
 
 ``Engine(loaded_config, on_update).run()`` polls every enabled device until cancelled;
 ``engine.write(device_id, key, value)`` and ``engine.read_now(device_id, keys)`` are what
-the MQTT side calls for commands. Buses are independent: a dead port or a dead unit on
-one bus never touches another bus.
+the MQTT side calls for commands; ``engine.snapshot()`` copies every counter for health
+reports and metrics. Buses are independent: a dead port or a dead unit on one bus never
+touches another bus.
 """
 
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable, Iterable
 
 from bridge.config import LoadedConfig, SerialBus, TcpBus
 from bridge.core.codec import Value
 from bridge.core.health import HealthPolicy
+from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, WriteSnapshot
 from bridge.core.timing import LinkTiming
 from bridge.errors import ValueRejectedError
 from bridge.modbus.poller import DEFAULT_POLICY, DevicePoller, DeviceUpdate
@@ -45,6 +48,7 @@ class Engine:
         policy: HealthPolicy = DEFAULT_POLICY,
     ) -> None:
         config = loaded.config
+        self.started = time.monotonic()  # every counter starts at zero here
         self.schedulers: dict[str, BusScheduler] = {}
         self.devices: dict[str, DevicePoller] = {}
         for bus in config.buses:
@@ -85,3 +89,56 @@ class Engine:
 
     async def read_now(self, device_id: str, keys: Iterable[str] | None = None) -> dict[str, Value]:
         return await self.device(device_id).read_now(keys)
+
+    def snapshot(self) -> Snapshot:
+        """Every bus's and device's counters now (an immutable copy)."""
+        now = time.monotonic()
+        return Snapshot(
+            wall=time.time(),
+            monotonic=now,
+            uptime=now - self.started,
+            buses=tuple(bus_snapshot(s) for s in self.schedulers.values()),
+            devices=tuple(device_snapshot(p) for p in self.devices.values()),
+        )
+
+
+def bus_snapshot(scheduler: BusScheduler) -> BusSnapshot:
+    counters = scheduler.counters
+    return BusSnapshot(
+        bus_id=scheduler.bus_id,
+        transport=scheduler.transport.bus.transport,
+        connected=scheduler.transport.connected,
+        requests=counters.transactions,
+        busy_seconds=counters.busy_seconds,
+        timeouts=counters.timeouts,
+        frame_errors=counters.frame_errors,
+        exceptions=counters.exceptions,
+        reopenings=counters.reopenings,
+    )
+
+
+def device_snapshot(poller: DevicePoller) -> DeviceSnapshot:
+    health, writes = poller.health, poller.writes
+    return DeviceSnapshot(
+        device_id=poller.device.id,
+        bus=poller.device.bus,
+        unit=poller.device.unit,
+        online=health.online,
+        requests=health.requests,
+        errors=health.errors,
+        timeouts=health.timeouts,
+        busy=health.busy,
+        exceptions=tuple(sorted(health.exceptions.items())),
+        latency_p50=health.percentile(0.5),
+        latency_p95=health.percentile(0.95),
+        last_success=health.last_success,
+        consecutive_failures=health.consecutive_failures,
+        backoff=health.backoff,
+        writes=WriteSnapshot(
+            done=writes.done,
+            skipped_unchanged=writes.skipped_unchanged,
+            rejected=writes.rejected,
+            failed=writes.failed,
+            expired=writes.expired,
+        ),
+    )

@@ -30,6 +30,7 @@ from bridge.core.request import Read, Write
 from bridge.core.timing import LinkTiming
 from bridge.errors import (
     BusError,
+    CommandExpiredError,
     DeviceExceptionError,
     DeviceTimeoutError,
     FrameError,
@@ -60,6 +61,7 @@ class WriteCounters:
     skipped_unchanged: int = 0
     rejected: int = 0
     failed: int = 0
+    expired: int = 0
     last_write: dict[int, float] = field(default_factory=dict)
 
 
@@ -337,8 +339,22 @@ class DevicePoller:
 
         ``deadline`` (monotonic): the first write must be sent by then, else the command is
         dropped with CommandExpiredError; the writes after it (a sign, a pulse's second
-        half) always follow, so a command is never left half done.
+        half) always follow, so a command is never left half done. Every command ends in
+        one of ``self.writes``: done, skipped_unchanged, rejected, failed or expired.
         """
+        try:
+            return await self._write(key, value, deadline)
+        except ValueRejectedError:
+            self.writes.rejected += 1
+            raise
+        except CommandExpiredError:
+            self.writes.expired += 1
+            raise
+        except (ModbusError, MissingDataError):
+            self.writes.failed += 1
+            raise
+
+    async def _write(self, key: str, value: object, deadline: float | None) -> Value:
         point = self.points.get(key)
         if point is None:
             raise ValueRejectedError(f"{key}: no such entity on {self.device.id}")
@@ -351,16 +367,12 @@ class DevicePoller:
             return self.values.get(key, decode(point, self.image))
         retries = self.retries if entity.idempotent else 0
         for index, write in enumerate(writes):
-            try:
-                await self._submit(
-                    write,
-                    Priority.WRITE,
-                    retries=retries,
-                    deadline=deadline if index == 0 else None,
-                )
-            except ModbusError:
-                self.writes.failed += 1
-                raise
+            await self._submit(
+                write,
+                Priority.WRITE,
+                retries=retries,
+                deadline=deadline if index == 0 else None,
+            )
             self._store(write)
             if entity.eeprom:
                 self.writes.last_write[write.address] = time.monotonic()

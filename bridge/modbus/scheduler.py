@@ -57,11 +57,12 @@ class _Job:
 
 @dataclass(slots=True)
 class BusCounters:
-    """What the bus did, for health reports."""
+    """What the bus did, for health reports (every frame counts, resends included)."""
 
     transactions: int = 0
     timeouts: int = 0
     frame_errors: int = 0
+    exceptions: int = 0  # exception replies
     busy_seconds: float = 0.0
     reopenings: int = 0
 
@@ -195,6 +196,9 @@ class BusScheduler:
             raise
         except FrameError:
             self.counters.frame_errors += 1
+            raise
+        except DeviceExceptionError:
+            self.counters.exceptions += 1
             raise
         finally:
             ended = time.monotonic()
