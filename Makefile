@@ -21,9 +21,10 @@ check: $(STAMP)
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
+# The five seed devices simulated, bridged to MQTT (a broker on 127.0.0.1:1883 if one
+# answers, else an embedded one) with a live table. Ctrl-C stops. ARGS="--mqtt-url ...".
 demo: $(STAMP)
-	$(BIN)/modbus-mqtt-bridge check -c examples/config.yaml
-	$(BIN)/modbus-mqtt-bridge mappings list
+	$(BIN)/modbus-mqtt-bridge demo $(ARGS)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -61,6 +61,7 @@ class Bridge:
         self._recent = RecentMessages(window=max(60.0, 10 * self.mqtt.command_expiry))
         self._locks: dict[str, asyncio.Lock] = {}
         self._group: asyncio.TaskGroup | None = None
+        self.mqtt_state = "connecting"  # "online" while connected, "offline" between
 
     # --- running ----------------------------------------------------------------------
 
@@ -70,9 +71,14 @@ class Bridge:
             self._group = group
             group.create_task(self.engine.run(), name="engine")
             group.create_task(
-                run_with_reconnect(self.mqtt, self.topics.bridge_state, self._session),
+                run_with_reconnect(
+                    self.mqtt, self.topics.bridge_state, self._session, on_state=self._mqtt_is
+                ),
                 name="mqtt",
             )
+
+    def _mqtt_is(self, state: str) -> None:
+        self.mqtt_state = state
 
     async def _session(self, client: MqttClient) -> None:
         """One connection: subscribe, clean up, publish everything, then serve."""

@@ -1,0 +1,222 @@
+"""``modbus-mqtt-bridge demo``: the five seed devices, simulated, on MQTT in seconds.
+
+It serves the five shipped mappings as simulated units 1..5 on a loopback Modbus TCP
+port, picks a broker (``--mqtt-url``, else 127.0.0.1:1883 if something answers there,
+else an embedded one), runs the real bridge against them with Home Assistant discovery,
+and shows a live table of the devices, their state and the topics to subscribe to.
+Ctrl-C (or SIGTERM) stops everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import socket
+import sys
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from bridge.app import Bridge
+from bridge.config import LoadedConfig, load_config_data
+from bridge.core.mapping import builtin_mapping_path, load_mapping
+from bridge.demo_view import DemoView, render_plain, render_table
+from bridge.errors import BridgeError, InputError
+from bridge.lifecycle import configure_logging, until_stopped
+from bridge.modbus.simulator import SimulatedUnit, Simulator
+from bridge.mqtt.broker import PROTOCOL, embedded_broker
+
+LOOPBACK = "127.0.0.1"
+DEFAULT_MODBUS_PORT = 5020
+
+
+@dataclass(frozen=True, slots=True)
+class SeedDevice:
+    id: str
+    name: str
+    mapping: str
+    unit: int
+
+
+SEEDS = (
+    SeedDevice("borehole_pump", "Borehole pump", "nastec_vasco", 1),
+    SeedDevice("fan_drive", "Fan drive", "p2_vfd", 2),
+    SeedDevice("booster_starter", "Booster starter", "soft_starter", 3),
+    SeedDevice("main_drive", "Main drive", "vacon_nx", 4),
+    SeedDevice("genset", "Genset", "smartgen_hgm6100", 5),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class BrokerChoice:
+    url: str
+    how: str  # "given", "local" or "embedded"
+    protocol: str = "5"
+
+
+def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    demo = commands.add_parser(
+        "demo",
+        help="simulate the five seed devices and bridge them to MQTT (no hardware needed)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    demo.add_argument("--mqtt-url", metavar="URL", help="broker to use (mqtt://host:port)")
+    demo.add_argument(
+        "--modbus-port",
+        type=int,
+        default=DEFAULT_MODBUS_PORT,
+        metavar="PORT",
+        help=f"loopback TCP port of the simulated devices (default {DEFAULT_MODBUS_PORT}; "
+        "a free one if taken)",
+    )
+    demo.add_argument(
+        "--local-broker",
+        default=f"{LOOPBACK}:1883",
+        metavar="HOST:PORT",
+        help="where to look for a running broker before starting an embedded one "
+        "(default %(default)s; the embedded one takes this port when it is free)",
+    )
+    demo.add_argument("--base-topic", default="modbus", metavar="TOPIC")
+    demo.add_argument(
+        "--plain", action="store_true", help="print state changes as lines, no live table"
+    )
+    demo.add_argument(
+        "--log-level", default="warning", choices=("debug", "info", "warning", "error")
+    )
+    demo.set_defaults(handler=run_demo)
+
+
+def run_demo(args: argparse.Namespace, out: TextIO) -> int:
+    host, _, port = args.local_broker.rpartition(":")
+    if not host or not port.isdigit():
+        raise InputError("--local-broker", [f"use HOST:PORT, not {args.local_broker!r}"])
+    configure_logging(args.log_level)
+    try:
+        asyncio.run(until_stopped(demo(args, out)))
+    except ExceptionGroup as failed:
+        reason = _bridge_error(failed)
+        if reason is None:
+            raise
+        print(f"error: {reason}", file=sys.stderr)
+        return 1
+    print("demo stopped", file=out, flush=True)
+    return 0
+
+
+def _bridge_error(group: ExceptionGroup[Exception]) -> BridgeError | None:
+    """The first deliberate error (e.g. no broker) inside a task group's failure."""
+    for exc in group.exceptions:
+        found = _bridge_error(exc) if isinstance(exc, ExceptionGroup) else exc
+        if isinstance(found, BridgeError):
+            return found
+    return None
+
+
+async def demo(args: argparse.Namespace, out: TextIO) -> None:
+    """Simulator, broker, bridge and view until cancelled."""
+    simulator = Simulator(
+        [SimulatedUnit(s.unit, load_mapping(builtin_mapping_path(s.mapping))) for s in SEEDS],
+        tick=1.0,
+    )
+    async with asyncio.TaskGroup() as group:
+        port = _free_port(args.modbus_port)
+        group.create_task(simulator.serve_tcp(LOOPBACK, port, "socket"), name="simulator")
+        async with asyncio.timeout(10):
+            await simulator.ready.wait()
+        async with _broker(args.mqtt_url, args.local_broker) as broker:
+            loaded = demo_config(broker, simulator.port, args.base_topic)
+            bridge = Bridge(loaded)
+            view = DemoView(bridge, broker_url=broker.url, broker_how=broker.how)
+            view.modbus = f"{LOOPBACK}:{simulator.port}"
+            async with asyncio.TaskGroup() as inner:
+                inner.create_task(bridge.run(), name="bridge")
+                show = _show_plain if args.plain or not out.isatty() else _show_live
+                await show(view, out)
+
+
+def demo_config(broker: BrokerChoice, modbus_port: int, base_topic: str) -> LoadedConfig:
+    """The bridge config of the demo: the five seed devices on one loopback TCP bus."""
+    data: dict[str, Any] = {
+        "mqtt": {
+            "url": broker.url,
+            "version": broker.protocol,
+            "base_topic": base_topic,
+            "client_id": f"modbus-mqtt-bridge-demo-{modbus_port}",
+        },
+        "buses": [
+            {
+                "id": "demo",
+                "transport": "tcp",
+                "host": LOOPBACK,
+                "tcp_port": modbus_port,
+                "timeout": 0.5,
+            }
+        ],
+        "devices": [
+            {"id": s.id, "name": s.name, "bus": "demo", "unit": s.unit, "mapping": s.mapping}
+            for s in SEEDS
+        ],
+    }
+    return load_config_data(data, Path("demo.yaml"))
+
+
+@contextlib.asynccontextmanager
+async def _broker(url: str | None, local: str) -> AsyncIterator[BrokerChoice]:
+    """The broker given, else a local one that answers, else an embedded one."""
+    if url is not None:
+        yield BrokerChoice(url, "given")
+        return
+    host, _, port_text = local.rpartition(":")
+    if await _answers(host, int(port_text)):
+        yield BrokerChoice(f"mqtt://{host}:{port_text}", "local")
+        return
+    port = _free_port(int(port_text))
+    async with embedded_broker(LOOPBACK, port) as embedded:
+        yield BrokerChoice(embedded, "embedded", PROTOCOL)
+
+
+async def _answers(host: str, port: int) -> bool:
+    """True when something accepts a TCP connection on ``host:port`` within a second."""
+    try:
+        async with asyncio.timeout(1.0):
+            _, writer = await asyncio.open_connection(host, port)
+    except (OSError, TimeoutError):
+        return False
+    writer.close()
+    with contextlib.suppress(OSError):
+        await writer.wait_closed()
+    return True
+
+
+def _free_port(preferred: int) -> int:
+    """``preferred`` if it can be bound on loopback, else a free port the OS picks."""
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((LOOPBACK, preferred))
+        except OSError:
+            probe.bind((LOOPBACK, 0))
+        return int(probe.getsockname()[1])
+
+
+async def _show_live(view: DemoView, out: TextIO) -> None:
+    from rich.console import Console  # noqa: PLC0415 - only for the terminal view
+    from rich.live import Live  # noqa: PLC0415
+
+    console = Console(file=out)
+    with Live(render_table(view), console=console, refresh_per_second=2) as live:
+        while True:
+            await asyncio.sleep(0.5)
+            live.update(render_table(view))
+
+
+async def _show_plain(view: DemoView, out: TextIO) -> None:
+    for line in view.banner():
+        print(line, file=out, flush=True)
+    while True:
+        for line in render_plain(view):
+            print(line, file=out, flush=True)
+        await asyncio.sleep(0.2)
