@@ -14,6 +14,12 @@ copies a shared ``state_topic`` into every component, and a write-only number or
 (a command word) would then parse the whole state document as its value. Without a
 state topic those run optimistic, as they must.
 
+The bridge is a device of its own: a connectivity binary_sensor on ``<base>/bridge/state``
+and, per bus and per device, diagnostic sensors whose value templates read the periodic
+``<base>/bridge/health`` document (see ``health_report``): per bus the request rate,
+utilisation (%), timeouts and frame errors; per device its state, p95 latency (ms),
+errors and requests.
+
 ``units`` are units read from registers (``unit_from``) and ``limits`` the current
 limits read from registers (``min_from``/``max_from``, see ``codec.limits_of``): the
 app rebuilds and republishes discovery when either changes.
@@ -23,6 +29,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping as AnyMapping
+from collections.abc import Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, Literal
@@ -181,13 +188,22 @@ def build_discovery(
 
 
 def build_bridge_discovery(
-    topics: Topics, origin: Origin, bridge_id: str, *, mode: Mode = "device"
+    topics: Topics,
+    origin: Origin,
+    bridge_id: str,
+    *,
+    mode: Mode = "device",
+    buses: Sequence[str] = (),
+    devices: Sequence[str] = (),
 ) -> list[Publish]:
     """The bridge as a device of its own, with a connectivity binary_sensor on
-    ``<base>/bridge/state`` (no availability: offline shows as disconnected).
+    ``<base>/bridge/state`` (no availability: offline shows as disconnected), and
+    diagnostic sensors reading ``<base>/bridge/health`` for each of ``buses`` and
+    ``devices`` (ids; pass none when health reports are off), available while the
+    bridge is online.
 
     ``bridge_id`` names the bridge in the discovery topic
-    (``<prefix>/device/<bridge_id>/config``) and in its entity id.
+    (``<prefix>/device/<bridge_id>/config``) and in its entity ids.
     """
     identifier = bridge_identifier(topics)
     connection = {
@@ -212,11 +228,104 @@ def build_bridge_discovery(
             "sw_version": origin.sw_version,
         },
         "origin": origin.as_dict(),
-        "cmps": {"connection_state": connection},
+        "cmps": {"connection_state": connection}
+        | health_components(topics, bridge_id, buses=buses, devices=devices),
     }
     if mode == "device":
         return [Publish(topics.device_config(bridge_id), dump(payload))]
     return _per_component(payload, topics, bridge_id)
+
+
+@dataclass(frozen=True, slots=True)
+class _HealthSensor:
+    """One diagnostic sensor per bus or per device, reading a field of bridge/health."""
+
+    suffix: str
+    name: str
+    field: str
+    options: AnyMapping[str, Any]
+    percent: bool = False  # a 0..1 fraction shown as %
+
+    def template(self, source: str) -> str:
+        value = f"value_json.{source}.{self.field}"
+        return f"{{{{ ({value} * 100) | round(1) }}}}" if self.percent else f"{{{{ {value} }}}}"
+
+
+_COUNTER = MappingProxyType({"state_class": "total_increasing"})
+_BUS_SENSORS = (
+    _HealthSensor(
+        "request_rate",
+        "request rate",
+        "requests_per_s",
+        {
+            "unit_of_measurement": "req/s",
+            "state_class": "measurement",
+            "icon": "mdi:swap-horizontal",
+        },
+    ),
+    _HealthSensor(
+        "utilisation",
+        "utilisation",
+        "utilisation",
+        {"unit_of_measurement": "%", "state_class": "measurement", "icon": "mdi:gauge"},
+        percent=True,
+    ),
+    _HealthSensor("timeouts", "timeouts", "timeouts", _COUNTER | {"icon": "mdi:timer-alert"}),
+    _HealthSensor(
+        "frame_errors", "frame errors", "frame_errors", _COUNTER | {"icon": "mdi:alert-circle"}
+    ),
+)
+_DEVICE_SENSORS = (
+    _HealthSensor(
+        "state",
+        "state",
+        "state",
+        {"device_class": "enum", "options": ["online", "offline", "unknown"]},
+    ),
+    _HealthSensor(
+        "latency_p95",
+        "latency p95",
+        "latency_p95_ms",
+        {"unit_of_measurement": "ms", "device_class": "duration", "state_class": "measurement"},
+    ),
+    _HealthSensor("errors", "errors", "errors", _COUNTER | {"icon": "mdi:alert"}),
+    _HealthSensor("requests", "requests", "requests", _COUNTER | {"icon": "mdi:counter"}),
+)
+
+
+def health_components(
+    topics: Topics, bridge_id: str, *, buses: Sequence[str], devices: Sequence[str]
+) -> dict[str, Config]:
+    """The bridge's diagnostic sensors on ``<base>/bridge/health``, by component key
+    (``bus_<bus>_<suffix>``, ``device_<device>_<suffix>``). The health document is not
+    retained: a sensor is unknown until the first report after Home Assistant starts,
+    and unavailable while the bridge is offline."""
+    identifier = bridge_identifier(topics)
+    shared = {
+        "qos": QOS,
+        "entity_category": "diagnostic",
+        "enabled_by_default": True,
+        "state_topic": topics.bridge_health,
+        "availability_topic": topics.bridge_state,
+    }
+    components: dict[str, Config] = {}
+    for kind, section, ids, sensors in (
+        ("bus", "buses", buses, _BUS_SENSORS),
+        ("device", "devices", devices, _DEVICE_SENSORS),
+    ):
+        for item_id in ids:
+            for sensor in sensors:
+                key = f"{kind}_{item_id}_{sensor.suffix}"
+                components[key] = {
+                    "platform": "sensor",
+                    "unique_id": f"{identifier}_{key}",
+                    "default_entity_id": f"sensor.{slug(bridge_id)}_{slug(key)}",
+                    "name": f"{kind.capitalize()} {item_id} {sensor.name}",
+                    **shared,
+                    "value_template": sensor.template(f"{section}['{item_id}']"),
+                    **sensor.options,
+                }
+    return components
 
 
 def _per_component(payload: dict[str, Any], topics: Topics, node_id: str) -> list[Publish]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import difflib
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,7 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
+from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, build_health_report
 from bridge.core.mapping import Mapping, builtin_mapping_names, builtin_mapping_path, load_mapping
 from bridge.core.topics import Topics
 from tests.factory import make_mapping
@@ -577,6 +579,97 @@ def test_bridge_device() -> None:
     assert "platform" not in json.loads(entity.payload)
 
 
+def _health_cmps(**kwargs: Any) -> dict[str, Any]:
+    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge", **kwargs)
+    cmps: dict[str, Any] = json.loads(message.payload)["cmps"]
+    return {k: v for k, v in cmps.items() if k != "connection_state"}
+
+
+def test_bridge_health_sensors_per_bus_and_device() -> None:
+    cmps = _health_cmps(buses=("rs485", "gw"), devices=("pump", "meter"))
+    assert list(cmps) == [
+        f"{kind}_{item}_{suffix}"
+        for kind, items, suffixes in (
+            ("bus", ("rs485", "gw"), ("request_rate", "utilisation", "timeouts", "frame_errors")),
+            ("device", ("pump", "meter"), ("state", "latency_p95", "errors", "requests")),
+        )
+        for item in items
+        for suffix in suffixes
+    ]
+    assert cmps["device_pump_latency_p95"] == {
+        "platform": "sensor",
+        "unique_id": "modbus_bridge_device_pump_latency_p95",
+        "default_entity_id": "sensor.modbus_bridge_device_pump_latency_p95",
+        "name": "Device pump latency p95",
+        "qos": 1,
+        "entity_category": "diagnostic",
+        "enabled_by_default": True,
+        "state_topic": "modbus/bridge/health",
+        "availability_topic": "modbus/bridge/state",
+        "value_template": "{{ value_json.devices['pump'].latency_p95_ms }}",
+        "unit_of_measurement": "ms",
+        "device_class": "duration",
+        "state_class": "measurement",
+    }
+    assert cmps["bus_gw_utilisation"]["value_template"] == (
+        "{{ (value_json.buses['gw'].utilisation * 100) | round(1) }}"
+    )
+    assert cmps["bus_gw_utilisation"]["unit_of_measurement"] == "%"
+    assert cmps["device_meter_state"]["options"] == ["online", "offline", "unknown"]
+    for key, component in cmps.items():
+        assert component["platform"] == "sensor", key
+        assert component["entity_category"] == "diagnostic", key
+        assert component["availability_topic"] == "modbus/bridge/state", key
+        assert component["state_topic"] == "modbus/bridge/health", key
+    unique_ids = [c["unique_id"] for c in cmps.values()]
+    assert len(set(unique_ids)) == len(unique_ids)
+
+
+def test_bridge_health_sensors_read_fields_of_the_health_document() -> None:
+    """Each template names a field the report builder writes, with a value the sensor
+    accepts (a number, or one of an enum's options)."""
+    snapshot = Snapshot(
+        wall=0.0,
+        monotonic=10.0,
+        uptime=10.0,
+        buses=(BusSnapshot("rs485", "rtu", connected=True, requests=5, busy_seconds=1.0),),
+        devices=(DeviceSnapshot("pump-1", "rs485", 1, online=True, latency_p95=0.02),),
+    )
+    document = build_health_report(snapshot)
+    pattern = re.compile(r"value_json\.(buses|devices)\['([^']+)'\]\.(\w+)")
+    for key, component in _health_cmps(buses=("rs485",), devices=("pump-1",)).items():
+        match = pattern.search(component["value_template"])
+        assert match is not None, key
+        section, item, field = match.groups()
+        value = document[section][item][field]
+        if "options" in component:
+            assert value in component["options"], key
+        else:
+            assert isinstance(value, int | float), key
+
+
+def test_bridge_health_sensor_entity_ids_are_slugs() -> None:
+    cmps = _health_cmps(buses=("line-A",), devices=())
+    component = cmps["bus_line-A_timeouts"]
+    assert component["unique_id"] == "modbus_bridge_bus_line-A_timeouts"
+    assert component["default_entity_id"] == "sensor.modbus_bridge_bus_line_a_timeouts"
+    assert component["value_template"] == "{{ value_json.buses['line-A'].timeouts }}"
+
+
+def test_bridge_health_sensors_in_entity_mode() -> None:
+    messages = build_bridge_discovery(
+        TOPICS, ORIGIN, "modbus_bridge", mode="entity", buses=("rs485",), devices=("pump",)
+    )
+    topics = [m.topic for m in messages]
+    assert len(topics) == 1 + 4 + 4
+    assert "homeassistant/sensor/modbus_bridge/bus_rs485_request_rate/config" in topics
+    assert "homeassistant/sensor/modbus_bridge/device_pump_state/config" in topics
+    for message in messages:
+        payload = json.loads(message.payload)
+        assert "platform" not in payload
+        assert payload["device"]["identifiers"] == ["modbus_bridge"]
+
+
 def test_every_device_points_to_the_bridge() -> None:
     [bridge_message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge")
     bridge_ids = json.loads(bridge_message.payload)["device"]["identifiers"]
@@ -630,7 +723,9 @@ def test_shipped_mapping_snapshot(name: str) -> None:
 
 
 def test_bridge_snapshot() -> None:
-    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge")
+    [message] = build_bridge_discovery(
+        TOPICS, ORIGIN, "modbus_bridge", buses=("rs485",), devices=("pump-1",)
+    )
     _check_snapshot("bridge", json.loads(message.payload))
 
 
