@@ -1,0 +1,234 @@
+"""The Prometheus/OpenMetrics endpoint (off by default): the health counters for scrapers.
+
+The only module that imports prometheus_client (an import-linter contract keeps it so).
+``serve_metrics(config, source)`` is an async context manager: with ``config.enabled`` it
+listens on ``config.host:config.port`` with a minimal HTTP server on the event loop
+(``GET /metrics``, also ``/``), and each scrape reads a fresh ``source()`` snapshot, on the
+loop's thread, so nothing is shared across threads. Plain Prometheus text by default,
+OpenMetrics when the scraper's Accept header asks for it. It stops listening (and drops
+open connections) when the block ends. An address that cannot be bound raises OSError
+naming it before anything else starts.
+
+The numbers are the health document's (``bridge.core.health_report``), counters since
+the bridge started:
+
+    modbus_bridge_uptime_seconds                        gauge
+    modbus_bus_connected{bus}                           gauge, 1 or 0
+    modbus_bus_requests_total{bus}                      frames sent, resends included
+    modbus_bus_busy_seconds_total{bus}                  time a frame was in flight
+    modbus_bus_timeouts_total{bus}
+    modbus_bus_frame_errors_total{bus}                  CRC, length
+    modbus_bus_exceptions_total{bus}                    exception replies
+    modbus_bus_reopenings_total{bus}                    failed (re)opens of the port
+    modbus_device_online{device}                        gauge, 1 or 0; absent until known
+    modbus_device_requests_total{device}
+    modbus_device_errors_total{device}
+    modbus_device_timeouts_total{device}
+    modbus_device_busy_answers_total{device}            busy answers
+    modbus_device_exceptions_total{device,code}
+    modbus_device_latency_seconds{device,quantile}      gauge, quantile 0.5 and 0.95;
+                                                        absent before the first answer
+    modbus_device_last_success_timestamp_seconds{device}  gauge, absent if never
+    modbus_device_consecutive_failures{device}          gauge
+    modbus_device_backoff_seconds{device}               gauge, 0 unless offline
+    modbus_device_writes_total{device,result}           result: done, skipped_unchanged,
+                                                        rejected, failed, expired
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator, Callable, Iterator
+from operator import attrgetter
+
+from prometheus_client.exposition import choose_encoder
+from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import CollectorRegistry
+
+from bridge.config import MetricsConfig
+from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot
+
+log = logging.getLogger(__name__)
+REQUEST_TIMEOUT = 10.0  # a scraper that sends no request line within this is dropped
+PATHS = frozenset({"/", "/metrics"})
+Source = Callable[[], Snapshot]
+
+_BUS_COUNTERS: tuple[tuple[str, str, Callable[[BusSnapshot], float]], ...] = (
+    ("requests", "Frames sent on the bus, resends included", attrgetter("requests")),
+    ("busy_seconds", "Time a frame was in flight on the bus", attrgetter("busy_seconds")),
+    ("timeouts", "Frames not answered in time", attrgetter("timeouts")),
+    ("frame_errors", "Answers that could not be parsed (CRC, length)", attrgetter("frame_errors")),
+    ("exceptions", "Modbus exception replies", attrgetter("exceptions")),
+    ("reopenings", "Failed attempts to (re)open the port or connection", attrgetter("reopenings")),
+)
+_DEVICE_COUNTERS: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...] = (
+    ("requests", "Requests to the device (a resend is one request)", attrgetter("requests")),
+    ("errors", "Failed requests: timeouts, bus down, failure exceptions", attrgetter("errors")),
+    ("timeouts", "Requests not answered (or the bus was down)", attrgetter("timeouts")),
+    ("busy_answers", "Busy answers (the device is alive, retried later)", attrgetter("busy")),
+)
+_DEVICE_GAUGES: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...] = (
+    (
+        "consecutive_failures",
+        "Failed requests since the last answer",
+        attrgetter("consecutive_failures"),
+    ),
+    ("backoff_seconds", "Retry interval while offline (0 when online)", attrgetter("backoff")),
+)
+_WRITE_RESULTS = ("done", "skipped_unchanged", "rejected", "failed", "expired")
+
+
+class SnapshotCollector:
+    """A prometheus_client collector over the latest snapshot of the engine."""
+
+    def __init__(self, source: Source) -> None:
+        self.source = source
+
+    def collect(self) -> Iterator[Metric]:
+        snapshot = self.source()
+        yield GaugeMetricFamily(
+            "modbus_bridge_uptime_seconds", "Seconds since the bridge started", snapshot.uptime
+        )
+        yield from _bus_metrics(snapshot.buses)
+        yield from _device_metrics(snapshot)
+
+
+def _bus_metrics(buses: tuple[BusSnapshot, ...]) -> Iterator[Metric]:
+    connected = GaugeMetricFamily(
+        "modbus_bus_connected", "1 while the port or connection is open", labels=["bus"]
+    )
+    for bus in buses:
+        connected.add_metric([bus.bus_id], 1.0 if bus.connected else 0.0)
+    yield connected
+    for name, documentation, value in _BUS_COUNTERS:
+        family = CounterMetricFamily(f"modbus_bus_{name}", documentation, labels=["bus"])
+        for bus in buses:
+            family.add_metric([bus.bus_id], value(bus))
+        yield family
+
+
+def _device_metrics(snapshot: Snapshot) -> Iterator[Metric]:
+    devices = snapshot.devices
+    online = GaugeMetricFamily(
+        "modbus_device_online", "1 online, 0 offline (absent until known)", labels=["device"]
+    )
+    latency = GaugeMetricFamily(
+        "modbus_device_latency_seconds",
+        "Request latency over the recent requests (queueing included)",
+        labels=["device", "quantile"],
+    )
+    last = GaugeMetricFamily(
+        "modbus_device_last_success_timestamp_seconds",
+        "When the device last answered (Unix time)",
+        labels=["device"],
+    )
+    exceptions = CounterMetricFamily(
+        "modbus_device_exceptions", "Exception replies by code", labels=["device", "code"]
+    )
+    writes = CounterMetricFamily(
+        "modbus_device_writes", "Write commands by how they ended", labels=["device", "result"]
+    )
+    for device in devices:
+        name = device.device_id
+        if device.online is not None:
+            online.add_metric([name], 1.0 if device.online else 0.0)
+        for quantile, seconds in (("0.5", device.latency_p50), ("0.95", device.latency_p95)):
+            if seconds is not None:
+                latency.add_metric([name, quantile], seconds)
+        last_success = snapshot.last_success(device)
+        if last_success is not None:
+            last.add_metric([name], last_success)
+        for code, count in device.exceptions:
+            exceptions.add_metric([name, str(code)], count)
+        for result in _WRITE_RESULTS:
+            writes.add_metric([name, result], getattr(device.writes, result))
+    yield from (online, latency, last, exceptions, writes)
+    for metric_name, documentation, value in _DEVICE_COUNTERS:
+        family = CounterMetricFamily(
+            f"modbus_device_{metric_name}", documentation, labels=["device"]
+        )
+        for device in devices:
+            family.add_metric([device.device_id], value(device))
+        yield family
+    for metric_name, documentation, value in _DEVICE_GAUGES:
+        gauge = GaugeMetricFamily(f"modbus_device_{metric_name}", documentation, labels=["device"])
+        for device in devices:
+            gauge.add_metric([device.device_id], value(device))
+        yield gauge
+
+
+class MetricsServer:
+    """Answers scrapes over HTTP on the event loop."""
+
+    def __init__(self, source: Source) -> None:
+        self.registry = CollectorRegistry()
+        self.registry.register(SnapshotCollector(source))
+        self._writers: set[asyncio.StreamWriter] = set()
+
+    def respond(self, method: str, target: str, accept: str) -> tuple[str, str, bytes]:
+        """Status, content type and body for one request."""
+        if method not in ("GET", "HEAD"):
+            return "405 Method Not Allowed", "text/plain; charset=utf-8", b"GET only\n"
+        if target.partition("?")[0] not in PATHS:
+            return "404 Not Found", "text/plain; charset=utf-8", b"metrics are on /metrics\n"
+        encoder, content_type = choose_encoder(accept)
+        return "200 OK", content_type, encoder(self.registry)
+
+    async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        """One connection, one request, then close (HTTP/1.1 with Connection: close)."""
+        self._writers.add(writer)
+        try:
+            async with asyncio.timeout(REQUEST_TIMEOUT):
+                head = await reader.readuntil(b"\r\n\r\n")
+            request, *lines = head.decode("latin-1").split("\r\n")
+            method, target, *_ = [*request.split(" "), "", ""]
+            headers = {
+                key.strip().lower(): value.strip()
+                for key, _, value in (line.partition(":") for line in lines)
+            }
+            status, content_type, body = self.respond(method, target, headers.get("accept", ""))
+            writer.write(
+                f"HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\n"
+                f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n".encode("latin-1")
+            )
+            if method != "HEAD":
+                writer.write(body)
+            await writer.drain()
+        except (
+            TimeoutError,
+            ConnectionError,
+            asyncio.IncompleteReadError,
+            asyncio.LimitOverrunError,
+        ):
+            pass  # a scraper that went away or never asked: nothing to answer
+        finally:
+            self._writers.discard(writer)
+            writer.close()
+
+    def close_connections(self) -> None:
+        for writer in list(self._writers):
+            writer.close()
+
+
+@contextlib.asynccontextmanager
+async def serve_metrics(config: MetricsConfig, source: Source) -> AsyncIterator[None]:
+    """Serve ``/metrics`` for the duration of the block when ``config.enabled``."""
+    if not config.enabled:
+        yield
+        return
+    metrics = MetricsServer(source)
+    try:
+        server = await asyncio.start_server(metrics.handle, config.host, config.port)
+    except OSError as exc:
+        reason = str(exc.strerror or exc).rpartition(": ")[2]  # asyncio repeats the address
+        where = f"{config.host}:{config.port}"
+        raise OSError(exc.errno, f"metrics endpoint: cannot listen on {where}: {reason}") from None
+    log.info("metrics on http://%s:%d/metrics", config.host, config.port)
+    try:
+        yield
+    finally:
+        server.close()
+        metrics.close_connections()
+        await server.wait_closed()
