@@ -28,7 +28,7 @@ FORMS = (
     "rtu:///dev/ttyUSB0?baudrate=9600&parity=N&stopbits=1&bytesize=8&timeout=1",
     "ascii:///dev/ttyUSB0?...",
 )
-DEFAULT_ID = "cli"
+DEFAULT_ID = "bus"
 _SERIAL_SETTINGS = ("baudrate", "parity", "stopbits", "bytesize", "timeout")
 _TCP_SETTINGS = ("timeout",)
 

@@ -17,20 +17,20 @@ SITE = ROOT / "examples" / "site.yaml"  # an RS-485 line and a gateway
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        ("tcp://127.0.0.1", TcpBus(id="cli", transport="tcp", host="127.0.0.1")),
+        ("tcp://127.0.0.1", TcpBus(id="bus", transport="tcp", host="127.0.0.1")),
         (
             "tcp://plc.local:1502?timeout=300ms",
-            TcpBus(id="cli", transport="tcp", host="plc.local", tcp_port=1502, timeout=0.3),
+            TcpBus(id="bus", transport="tcp", host="plc.local", tcp_port=1502, timeout=0.3),
         ),
         (
             "rtu-over-tcp://[::1]:4001/",
-            TcpBus(id="cli", transport="rtu-over-tcp", host="::1", tcp_port=4001),
+            TcpBus(id="bus", transport="rtu-over-tcp", host="::1", tcp_port=4001),
         ),
-        ("rtu:///dev/ttyUSB0", SerialBus(id="cli", transport="rtu", port="/dev/ttyUSB0")),
+        ("rtu:///dev/ttyUSB0", SerialBus(id="bus", transport="rtu", port="/dev/ttyUSB0")),
         (
             "rtu:///dev/ttyUSB0?baudrate=19200&parity=e&stopbits=2&bytesize=7&timeout=0.5",
             SerialBus(
-                id="cli",
+                id="bus",
                 transport="rtu",
                 port="/dev/ttyUSB0",
                 baudrate=19200,
@@ -42,9 +42,9 @@ SITE = ROOT / "examples" / "site.yaml"  # an RS-485 line and a gateway
         ),
         (
             "ascii:///dev/ttyS1?parity=O",
-            SerialBus(id="cli", transport="ascii", port="/dev/ttyS1", parity="O"),
+            SerialBus(id="bus", transport="ascii", port="/dev/ttyS1", parity="O"),
         ),
-        ("rtu://COM3", SerialBus(id="cli", transport="rtu", port="COM3")),
+        ("rtu://COM3", SerialBus(id="bus", transport="rtu", port="COM3")),
     ],
 )
 def test_specs(text: str, expected: SerialBus | TcpBus) -> None:
@@ -100,7 +100,7 @@ def test_a_bus_from_a_config_file() -> None:
 
 
 def test_a_spec_wins_over_the_config_file() -> None:
-    assert select_bus("tcp://10.0.0.1", SITE) == TcpBus(id="cli", transport="tcp", host="10.0.0.1")
+    assert select_bus("tcp://10.0.0.1", SITE) == TcpBus(id="bus", transport="tcp", host="10.0.0.1")
 
 
 def test_a_bus_id_needs_a_config_file() -> None:
