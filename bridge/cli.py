@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
-from bridge import __version__, demo, simulate_cli
+from bridge import __version__, commission_cli, demo, simulate_cli
 from bridge.config import config_schema, load_config
 from bridge.core.address import format_address
 from bridge.core.entity import Entity
@@ -84,6 +84,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
     run.set_defaults(handler=_run)
     simulate_cli.add_parser(commands)
+    commission_cli.add_parsers(commands)
     demo.add_parser(commands)
     return parser
 
