@@ -7,6 +7,8 @@ discovery and the whole state. Pollers report changes; a publisher sends the dev
 JSON, the changed plain values and its availability. Commands run per device in arrival
 order, each with an expiry: one that could not run in time is dropped with an error,
 never executed late; anything refused or failing goes to ``<base>/<device>/error``.
+Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
+optional metrics endpoint serves the same counters for the whole run.
 """
 
 from __future__ import annotations
@@ -32,9 +34,11 @@ from bridge.core.discovery import (
     removal,
 )
 from bridge.core.entity import PollClass
+from bridge.core.health_report import HealthReporter
 from bridge.core.state import plain_payload, published, state_document
 from bridge.core.topics import Action, Topics
 from bridge.errors import BridgeError, MissingDataError, ValueRejectedError
+from bridge.metrics import serve_metrics
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
 from bridge.mqtt import Message, MqttClient, MqttError, run_with_reconnect
@@ -61,13 +65,15 @@ class Bridge:
         self._recent = RecentMessages(window=max(60.0, 10 * self.mqtt.command_expiry))
         self._locks: dict[str, asyncio.Lock] = {}
         self._group: asyncio.TaskGroup | None = None
+        self._health = HealthReporter()  # rates since the previous report
         self.mqtt_state = "connecting"  # "online" while connected, "offline" between
 
     # --- running ----------------------------------------------------------------------
 
     async def run(self) -> None:
         """Run until cancelled."""
-        async with asyncio.TaskGroup() as group:
+        metrics = serve_metrics(self.loaded.config.bridge.metrics, self.engine.snapshot)
+        async with metrics, asyncio.TaskGroup() as group:
             self._group = group
             group.create_task(self.engine.run(), name="engine")
             group.create_task(
@@ -89,6 +95,7 @@ class Bridge:
             async with asyncio.TaskGroup() as group:
                 group.create_task(self._publisher(client))
                 group.create_task(self._refresher(client))
+                group.create_task(self._health_reports(client))
                 async for message in client.messages():
                     await self._handle(client, message)
         except ExceptionGroup as failed:
@@ -104,6 +111,14 @@ class Bridge:
         while True:
             await asyncio.sleep(self.mqtt.state_refresh)
             await self._publish_everything(client)
+
+    async def _health_reports(self, client: MqttClient) -> None:
+        """``<base>/bridge/health`` now and every ``health_interval`` (never when 0)."""
+        interval = self.loaded.config.bridge.health_interval
+        while interval > 0:
+            report = self._health.report(self.engine.snapshot())
+            await client.publish(self.topics.bridge_health, json.dumps(report), retain=False)
+            await asyncio.sleep(interval)
 
     # --- state ------------------------------------------------------------------------
 
@@ -216,7 +231,14 @@ class Bridge:
     ) -> None:
         if self.mqtt.discovery == "off":
             return
-        bridge_messages = build_bridge_discovery(self.topics, self.origin, self.topics.base)
+        health = self.loaded.config.bridge.health_interval > 0  # the sensors read it
+        bridge_messages = build_bridge_discovery(
+            self.topics,
+            self.origin,
+            self.topics.base,
+            buses=list(self.engine.schedulers) if health else [],
+            devices=list(self.engine.devices) if health else [],
+        )
         wanted: list[Publish] = [] if only else list(bridge_messages)
         for device_id, poller in self.engine.devices.items():
             if only is not None and device_id != only:

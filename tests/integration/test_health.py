@@ -1,0 +1,336 @@
+"""Health reports and metrics end to end: a real Mosquitto, the simulator, `Bridge.run()`.
+
+Three units on one simulated TCP gateway: ``pump`` answers, ``dead`` never answers
+(timeouts), ``faulty`` answers every request with exception 04 (server device failure, which the
+Vacon means as a failure too).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import re
+import socket
+import urllib.error
+import urllib.request
+from collections.abc import AsyncIterator
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.app import Bridge
+from bridge.cli import EXIT_FAILED, main
+from bridge.config import load_config_data
+from bridge.core.mapping import builtin_mapping_path, load_mapping
+from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
+from tests.integration.harness import cancel, eventually, serving_tcp
+from tests.integration.mosquitto import Broker
+from tests.integration.test_bridge import Observer, observing
+
+HEALTH = "modbus/bridge/health"
+PUMP, DEAD, FAULTY = 1, 2, 3
+FAILURE = 4  # exception 04: server device failure
+Sample = tuple[str, tuple[tuple[str, str], ...]]
+
+
+def three_units() -> Simulator:
+    def unit(number: int, name: str, **quirks: Any) -> SimulatedUnit:
+        return SimulatedUnit(
+            number, load_mapping(builtin_mapping_path(name)), quirks=Quirks(**quirks)
+        )
+
+    return Simulator(
+        [
+            unit(PUMP, "nastec_vasco"),
+            unit(DEAD, "p2_vfd", dead=True),
+            unit(FAULTY, "vacon_nx", exception_code=FAILURE),
+        ]
+    )
+
+
+def health_config(
+    broker_url: str,
+    port: int,
+    *,
+    health_interval: float = 0.2,
+    mqtt: dict[str, Any] | None = None,
+    **bridge: Any,
+) -> Any:
+    devices = [
+        {"id": "pump", "bus": "tcp", "unit": PUMP, "mapping": "nastec_vasco"},
+        {"id": "dead", "bus": "tcp", "unit": DEAD, "mapping": "p2_vfd"},
+        {"id": "faulty", "bus": "tcp", "unit": FAULTY, "mapping": "vacon_nx"},
+    ]
+    data = {
+        "mqtt": {"url": broker_url, "base_topic": "modbus", "command_expiry": 3} | (mqtt or {}),
+        "bridge": {"health_interval": health_interval} | bridge,
+        "buses": [
+            {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port, "timeout": 0.3}
+        ],
+        "devices": [d | {"poll": {"fast": 0.3, "slow": 5}} for d in devices],
+    }
+    return load_config_data(data, Path("health.yaml"))
+
+
+@contextlib.asynccontextmanager
+async def running(broker: Broker, **bridge: Any) -> AsyncIterator[Bridge]:
+    async with serving_tcp(three_units()) as port:
+        running_bridge = Bridge(health_config(broker.url, port, **bridge))
+        task = asyncio.create_task(running_bridge.run())
+        try:
+            yield running_bridge
+        finally:
+            await cancel(task)
+
+
+def reports(observer: Observer) -> list[dict[str, Any]]:
+    return [json.loads(m.payload) for m in observer.log if m.topic == HEALTH]
+
+
+def latest(observer: Observer) -> dict[str, Any]:
+    found = reports(observer)
+    return found[-1] if found else {}
+
+
+def device(observer: Observer, device_id: str) -> dict[str, Any]:
+    return latest(observer).get("devices", {}).get(device_id, {})
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port: int = probe.getsockname()[1]
+        return port
+
+
+def scrape(port: int, path: str = "/metrics") -> dict[Sample, float]:
+    """Every sample of a Prometheus text scrape, by name and sorted labels."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as answer:
+        text = answer.read().decode()
+    samples: dict[Sample, float] = {}
+    for line in text.splitlines():
+        if not line or line.startswith("#"):
+            continue
+        series, value = line.rsplit(" ", 1)
+        name, _, labels = series.partition("{")
+        pairs = tuple(sorted(re.findall(r'(\w+)="([^"]*)"', labels)))
+        samples[(name, pairs)] = float(value)
+    return samples
+
+
+@pytest.mark.asyncio
+async def test_health_is_published_periodically_and_counts_what_happens(mosquitto: Broker) -> None:
+    async with observing(mosquitto, "modbus/bridge/#") as observer, running(mosquitto):
+        await eventually(lambda: len(reports(observer)) >= 3, timeout=10)
+        assert all(not m.retain for m in observer.log if m.topic == HEALTH)
+        first, second = reports(observer)[:2]
+        assert datetime.fromisoformat(first["timestamp"]) <= datetime.fromisoformat(
+            second["timestamp"]
+        )
+        assert first["uptime_s"] <= second["uptime_s"]
+        assert set(second["buses"]) == {"tcp"}
+        assert set(second["devices"]) == {"pump", "dead", "faulty"}
+
+        # the dead unit: timeouts, then offline with a backoff and never a success
+        await eventually(lambda: device(observer, "dead").get("state") == "offline", timeout=10)
+        dead = device(observer, "dead")
+        assert dead["timeouts"] >= 3
+        assert dead["errors"] >= dead["timeouts"]
+        assert dead["consecutive_failures"] >= 3
+        assert dead["backoff_s"] > 0
+        assert dead["last_success"] is None
+        assert dead["latency_p95_ms"] is None
+
+        # the faulty unit: its exception code counted under its string key
+        await eventually(lambda: device(observer, "faulty").get("exceptions", {}).get("4", 0) >= 3)
+        faulty = device(observer, "faulty")
+        assert set(faulty["exceptions"]) == {"4"}
+        assert faulty["state"] == "offline"  # 04 means failure: it counts towards offline
+        assert faulty["timeouts"] == 0
+
+        # the healthy unit: online, latencies and a last success in UTC
+        await eventually(lambda: device(observer, "pump").get("latency_p95_ms") is not None)
+        document = latest(observer)
+        pump = document["devices"]["pump"]
+        assert (pump["state"], pump["bus"], pump["unit"]) == ("online", "tcp", PUMP)
+        assert pump["requests"] > 0
+        assert pump["errors"] == 0
+        assert 0 < pump["latency_p50_ms"] <= pump["latency_p95_ms"]
+        assert datetime.fromisoformat(pump["last_success"]).utcoffset().total_seconds() == 0
+
+        # the bus sees every frame of every device
+        bus = document["buses"]["tcp"]
+        devices = document["devices"].values()
+        assert (bus["transport"], bus["connected"]) == ("tcp", True)
+        assert bus["requests"] >= sum(d["requests"] for d in devices)
+        assert bus["timeouts"] >= document["devices"]["dead"]["timeouts"]
+        assert bus["exceptions"] >= document["devices"]["faulty"]["exceptions"]["4"]
+        assert bus["frame_errors"] == 0
+        assert 0 <= bus["utilisation"] <= 1
+        await eventually(lambda: latest(observer)["buses"]["tcp"]["requests_per_s"] > 0)
+
+
+@pytest.mark.asyncio
+async def test_write_counters(mosquitto: Broker) -> None:
+    """delta_start is an EEPROM setting: the value it holds is skipped, a new one written,
+    and a second write within the EEPROM interval refused; out of range is refused too."""
+    async with observing(mosquitto, "modbus/#") as observer, running(mosquitto):
+        await eventually(
+            lambda: (
+                "modbus/pump" in observer.retained and "delta_start" in observer.json("modbus/pump")
+            ),
+            timeout=10,
+        )
+        held = observer.json("modbus/pump")["delta_start"]
+        client = observer.client
+
+        await client.publish("modbus/pump/delta_start/set", str(held))
+        await eventually(lambda: device(observer, "pump").get("writes_skipped_unchanged") == 1)
+        assert device(observer, "pump")["writes_done"] == 0
+
+        new = round(held + 1.5, 1)
+        await client.publish("modbus/pump/delta_start/set", str(new))
+        await eventually(lambda: device(observer, "pump").get("writes_done") == 1)
+        await eventually(lambda: observer.json("modbus/pump")["delta_start"] == new)
+
+        await client.publish("modbus/pump/delta_start/set", str(new))  # EEPROM rate limit
+        await client.publish("modbus/pump/delta_start/set", "5000")  # out of range
+        await eventually(lambda: device(observer, "pump").get("writes_rejected") == 2)
+        pump = device(observer, "pump")
+        assert (pump["writes_done"], pump["writes_skipped_unchanged"]) == (1, 1)
+        assert (pump["writes_failed"], pump["writes_expired"]) == (0, 0)
+
+
+@pytest.mark.asyncio
+async def test_metrics_endpoint_serves_the_same_counters(mosquitto: Broker) -> None:
+    port = free_port()
+    metrics = {"enabled": True, "host": "127.0.0.1", "port": port}
+    async with (
+        observing(mosquitto, "modbus/bridge/#") as observer,
+        running(mosquitto, metrics=metrics) as bridge,
+    ):
+        await eventually(
+            lambda: (
+                device(observer, "dead").get("state") == "offline"
+                and device(observer, "faulty").get("exceptions", {}).get("4", 0) > 0
+                and device(observer, "pump").get("requests", 0) > 0
+            ),
+            timeout=10,
+        )
+        before = latest(observer)
+        samples = await asyncio.to_thread(scrape, port)
+        after = bridge.engine.snapshot()
+
+        def sample(name: str, **labels: str) -> float:
+            return samples[(name, tuple(sorted(labels.items())))]
+
+        # counters only grow: the report before the scrape <= the scrape <= a snapshot after
+        bus_before, bus_after = before["buses"]["tcp"], after.buses[0]
+        for name, field in (("requests", "requests"), ("timeouts", "timeouts")):
+            scraped = sample(f"modbus_bus_{name}_total", bus="tcp")
+            assert bus_before[field] <= scraped <= getattr(bus_after, field), name
+        devices_after = {d.device_id: d for d in after.devices}
+        for device_id in ("pump", "dead", "faulty"):
+            scraped = sample("modbus_device_requests_total", device=device_id)
+            assert before["devices"][device_id]["requests"] <= scraped
+            assert scraped <= devices_after[device_id].requests
+        faults = sample("modbus_device_exceptions_total", device="faulty", code="4")
+        assert before["devices"]["faulty"]["exceptions"]["4"] <= faults
+        assert sample("modbus_device_timeouts_total", device="dead") >= 3
+        assert sample("modbus_device_online", device="pump") == 1.0
+        assert sample("modbus_device_online", device="dead") == 0.0
+        assert sample("modbus_device_consecutive_failures", device="dead") >= 3
+        assert sample("modbus_device_backoff_seconds", device="dead") > 0
+        assert sample("modbus_bus_connected", bus="tcp") == 1.0
+        assert sample("modbus_bus_busy_seconds_total", bus="tcp") > 0
+        assert sample("modbus_device_latency_seconds", device="pump", quantile="0.95") > 0
+        assert sample("modbus_device_last_success_timestamp_seconds", device="pump") > 0
+        assert ("modbus_device_last_success_timestamp_seconds", (("device", "dead"),)) not in (
+            samples
+        )
+        for result in ("done", "skipped_unchanged", "rejected", "failed", "expired"):
+            assert sample("modbus_device_writes_total", device="pump", result=result) == 0
+
+        with pytest.raises(urllib.error.HTTPError, match="404"):
+            await asyncio.to_thread(scrape, port, "/elsewhere")
+
+    with pytest.raises(urllib.error.URLError):  # stopped with the bridge
+        await asyncio.to_thread(scrape, port)
+
+
+@pytest.mark.asyncio
+async def test_health_interval_zero_publishes_no_health_and_no_health_sensors(
+    mosquitto: Broker,
+) -> None:
+    async with (
+        observing(mosquitto, "modbus/bridge/#", "homeassistant/device/modbus/config") as observer,
+        serving_tcp(three_units()) as port,
+    ):
+        config = health_config(mosquitto.url, port, health_interval=0, mqtt={"state_refresh": 0.3})
+        task = asyncio.create_task(Bridge(config).run())
+        try:
+            # a second bridge/devices comes from the refresher, which starts with the
+            # health task: by then a first report would have been published
+            await eventually(
+                lambda: sum(m.topic == "modbus/bridge/devices" for m in observer.log) >= 2,
+                timeout=10,
+            )
+            discovery = observer.json("homeassistant/device/modbus/config")
+        finally:
+            await cancel(task)
+    assert reports(observer) == []
+    assert list(discovery["cmps"]) == ["connection_state"]
+
+
+@pytest.mark.asyncio
+async def test_health_sensors_in_discovery(mosquitto: Broker) -> None:
+    async with (
+        observing(mosquitto, "homeassistant/device/modbus/config") as observer,
+        running(mosquitto),
+    ):
+        topic = "homeassistant/device/modbus/config"
+        await eventually(lambda: topic in observer.retained, timeout=10)
+        cmps = observer.json(topic)["cmps"]
+    assert "bus_tcp_request_rate" in cmps
+    for device_id in ("pump", "dead", "faulty"):
+        assert cmps[f"device_{device_id}_state"]["state_topic"] == HEALTH
+    assert len(cmps) == 1 + 4 + 3 * 4
+
+
+@pytest.mark.asyncio
+async def test_metrics_port_in_use_is_a_clear_error(mosquitto: Broker) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        metrics = {"enabled": True, "host": "127.0.0.1", "port": port}
+        config = health_config(mosquitto.url, 1, metrics=metrics)
+        with pytest.raises(OSError, match=f"metrics endpoint: cannot listen on 127.0.0.1:{port}"):
+            async with asyncio.timeout(10):
+                await Bridge(config).run()
+
+
+def test_metrics_port_in_use_from_the_command_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        config = tmp_path / "config.yaml"
+        config.write_text(
+            json.dumps(
+                {
+                    "mqtt": {"url": "mqtt://127.0.0.1:1"},
+                    "bridge": {"metrics": {"enabled": True, "port": port}},
+                    "buses": [{"id": "tcp", "transport": "tcp", "host": "127.0.0.1"}],
+                }
+            )
+        )
+        assert main(["run", "-c", str(config)]) == EXIT_FAILED
+    error = capsys.readouterr().err
+    assert f"metrics endpoint: cannot listen on 127.0.0.1:{port}: address already in use" in error
+    assert "Traceback" not in error
