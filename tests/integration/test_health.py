@@ -12,6 +12,7 @@ import contextlib
 import json
 import re
 import socket
+import time
 import urllib.error
 import urllib.request
 from collections.abc import AsyncIterator
@@ -25,7 +26,10 @@ from bridge.app import Bridge
 from bridge.cli import EXIT_FAILED, main
 from bridge.config import load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
+from bridge.errors import CommandExpiredError, DeviceTimeoutError, ValueRejectedError
+from bridge.modbus.engine import Engine
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
+from tests.integration import harness
 from tests.integration.harness import cancel, eventually, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import Observer, observing
@@ -202,6 +206,26 @@ async def test_write_counters(mosquitto: Broker) -> None:
         pump = device(observer, "pump")
         assert (pump["writes_done"], pump["writes_skipped_unchanged"]) == (1, 1)
         assert (pump["writes_failed"], pump["writes_expired"]) == (0, 0)
+
+
+@pytest.mark.asyncio
+async def test_every_write_ends_in_one_counter() -> None:
+    """Failed (no answer) and expired (not sent by its deadline) writes, on the engine."""
+    async with serving_tcp(three_units()) as port:
+        engine = Engine(health_config("mqtt://127.0.0.1:1", port))
+        async with harness.running(engine, pollers=False):
+            with pytest.raises(DeviceTimeoutError):
+                await engine.devices["dead"].write("set_value", 10)
+            pump = engine.devices["pump"]
+            await pump.read_now(["delta_start"])
+            new = float(pump.values["delta_start"] or 0) + 1
+            with pytest.raises(CommandExpiredError):
+                await pump.write("delta_start", new, deadline=time.monotonic() - 1)
+            with pytest.raises(ValueRejectedError):
+                await pump.write("no_such_entity", 1)
+        writes = {d.device_id: d.writes for d in engine.snapshot().devices}
+    assert (writes["dead"].failed, writes["dead"].done) == (1, 0)
+    assert (writes["pump"].expired, writes["pump"].rejected, writes["pump"].done) == (1, 1, 0)
 
 
 @pytest.mark.asyncio
