@@ -18,7 +18,7 @@ import json
 import sys
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
-from typing import Any, TextIO, TypeVar
+from typing import Any, TextIO, TypeAlias, TypeVar
 
 from rich import box
 from rich.console import Console
@@ -48,42 +48,81 @@ EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
 SCAN_TIMEOUT = 0.2
 WIRE = "wire address (0-based, as sent in the frame), decimal or 0x hex"
 Handler = Callable[[argparse.Namespace, TextIO], int]
+Commands: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 T = TypeVar("T")
 
 
-def add_parsers(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def add_parsers(commands: Commands) -> None:
     """Register ``scan``, ``read`` and ``write``."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--bus",
         required=True,
         metavar="SPEC_OR_ID",
-        help=f"{' | '.join(FORMS)}; or the id of a bus in the -c config file",
+        help=f"{' | '.join(FORMS)} (quote it: '&' means something to the shell); "
+        "or the id of a bus in the -c config file",
     )
     common.add_argument("-c", "--config", type=Path, metavar="FILE", help="config file of --bus")
     common.add_argument("--json", action="store_true", help="print JSON for scripts")
-    epilog = "exit codes: 0 done, 2 invalid input (nothing sent), 1 bus or unit failure"
+    _add_scan(commands, common)
+    _add_read(commands, common)
+    _add_write(commands, common)
 
+
+_EPILOG = "exit codes: 0 done, 2 invalid input (nothing sent), 1 bus or unit failure"
+
+
+def _add_scan(commands: Commands, common: argparse.ArgumentParser) -> None:
     scanner = commands.add_parser(
-        "scan", parents=[common], help="find the units that answer on a bus", epilog=epilog
+        "scan",
+        parents=[common],
+        help="find the units that answer on a bus",
+        description="Probe each unit (read holding 0) one after the other. Any answer, even "
+        "a Modbus exception, means a unit is there; no answer within --timeout means none.",
+        epilog=_EPILOG,
     )
     scanner.add_argument(
-        "--units", type=unit_list, default="1-247", metavar="LIST", help="e.g. 1-247 or 1,3,10-20"
+        "--units",
+        type=unit_list,
+        default="1-247",
+        metavar="LIST",
+        help="e.g. 1-247 (default) or 1,3,10-20",
     )
     scanner.add_argument(
-        "--timeout", type=seconds, default=SCAN_TIMEOUT, help="seconds to wait for each unit"
+        "--timeout",
+        type=seconds,
+        default=SCAN_TIMEOUT,
+        metavar="SECONDS",
+        help=f"wait this long for each unit (default {SCAN_TIMEOUT})",
     )
     scanner.set_defaults(handler=_guarded(_scan))
 
+
+def _add_read(commands: Commands, common: argparse.ArgumentParser) -> None:
     reader = commands.add_parser(
-        "read", parents=[common], help="read raw registers or bits, shown every way", epilog=epilog
+        "read",
+        parents=[common],
+        help="read raw registers or bits, shown every way",
+        description="Read COUNT registers (or bits) from ADDRESS and show each word as u16, "
+        "s16, hex, ASCII and bits, and each pair of words as u32/s32/f32 in the byte orders "
+        f"ABCD, CDAB, BADC, DCBA. ADDRESS is a {WIRE}.",
+        epilog=_EPILOG,
     )
     _add_target(reader, tuple(table.value for table in Table))
-    reader.add_argument("count", type=number, nargs="?", default=1, help="registers or bits")
+    reader.add_argument(
+        "count", type=number, nargs="?", default=1, metavar="COUNT", help="registers or bits"
+    )
     reader.set_defaults(handler=_guarded(_read))
 
+
+def _add_write(commands: Commands, common: argparse.ArgumentParser) -> None:
     writer = commands.add_parser(
-        "write", parents=[common], help="write raw registers or coils", epilog=epilog
+        "write",
+        parents=[common],
+        help="write raw registers or coils",
+        description="Write VALUEs from ADDRESS: FC06 (coils FC05) for one value, FC16 (FC15) "
+        f"for several. ADDRESS is a {WIRE}. Values are checked before anything is sent.",
+        epilog=_EPILOG,
     )
     _add_target(writer, (Table.HOLDING.value, Table.COIL.value))
     writer.add_argument(
@@ -93,10 +132,14 @@ def add_parsers(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         "--function",
         type=int,
         choices=(5, 6, 15, 16),
-        help="default: 6/5 for one value, 16/15 for several",
+        help="force a function code, e.g. 16 for one register on devices without FC06",
     )
     writer.add_argument(
-        "--coil-on", type=number, default=COIL_ON, metavar="WORD", help="FC05 ON word"
+        "--coil-on",
+        type=number,
+        default=COIL_ON,
+        metavar="WORD",
+        help="the word FC05 sends for ON (default 0xFF00; some devices want 0x00FF)",
     )
     writer.set_defaults(handler=_guarded(_write))
 
@@ -105,9 +148,12 @@ def _add_target(parser: argparse.ArgumentParser, tables: tuple[str, ...]) -> Non
     parser.add_argument("--unit", type=unit_id, required=True, metavar="N", help="unit id")
     parser.add_argument("--table", choices=tables, default="holding")
     parser.add_argument(
-        "--timeout", type=seconds, help="seconds to wait for the answer (default: the bus's)"
+        "--timeout",
+        type=seconds,
+        metavar="SECONDS",
+        help="wait this long for the answer (default: the bus's timeout)",
     )
-    parser.add_argument("address", type=number, help=WIRE)
+    parser.add_argument("address", type=number, metavar="ADDRESS", help=WIRE)
 
 
 # --- argument types ------------------------------------------------------------------

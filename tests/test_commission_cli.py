@@ -255,7 +255,7 @@ def test_a_refused_write_exits_1_naming_the_exception(
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--unit", "1", "0xZZ", "1"], "argument address: '0xZZ' is not a decimal or 0x hex"),
+        (["--unit", "1", "0xZZ", "1"], "argument ADDRESS: '0xZZ' is not a decimal or 0x hex"),
         (["--unit", "0", "54", "1"], "argument --unit: unit 0: use 1..255 (0 is broadcast)"),
         (["--unit", "1", "--table", "input", "54", "1"], "argument --table: invalid choice"),
     ],
