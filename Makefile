@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: test check lint demo clean
+.PHONY: test check lint demo docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,10 @@ check: $(STAMP)
 # answers, else an embedded one) with a live table. Ctrl-C stops. ARGS="--mqtt-url ...".
 demo: $(STAMP)
 	$(BIN)/modbus-mqtt-bridge demo $(ARGS)
+
+# docs/config.md is generated from the config schema (tests/test_docs.py checks it).
+docs: $(STAMP)
+	$(BIN)/modbus-mqtt-bridge schema --markdown > docs/config.md
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

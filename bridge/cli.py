@@ -60,6 +60,9 @@ def _parser() -> argparse.ArgumentParser:
 
     schema = commands.add_parser("schema", help="print the JSON Schema of config and mapping")
     schema.add_argument("which", nargs="?", choices=("all", "config", "mapping"), default="all")
+    schema.add_argument(
+        "--markdown", action="store_true", help="print the config reference (docs/config.md)"
+    )
     schema.set_defaults(handler=_schema)
 
     mappings = commands.add_parser("mappings", help="list, show or validate mappings")
@@ -113,6 +116,11 @@ def _check(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def _schema(args: argparse.Namespace, out: TextIO) -> int:
+    if args.markdown:
+        from bridge.config_doc import render_config_doc  # noqa: PLC0415 - docs only
+
+        out.write(render_config_doc())
+        return EXIT_OK
     schemas = {"config": config_schema(), "mapping": mapping_schema()}
     document = schemas if args.which == "all" else schemas[args.which]
     json.dump(document, out, indent=2)
