@@ -69,9 +69,10 @@ USER bridge:bridge
 # Prometheus metrics (config bridge.metrics: {enabled: true, host: 0.0.0.0, port: 9464}).
 EXPOSE 9464
 
-# Health = the running bridge answers on its metrics endpoint. That endpoint is served by
-# the bridge process itself, so a hung or crashed bridge fails the check, which
-# `modbus-mqtt-bridge check` (a config validation) or a "PID 1 exists" test would not.
+# Health = the running bridge answers on its metrics endpoint. That endpoint is served on
+# the bridge's own event loop (bridge/metrics.py), so a crashed bridge or a blocked loop
+# fails the check, which `modbus-mqtt-bridge check` (a config validation) or a "PID 1
+# exists" test would not.
 # It needs bridge.metrics.enabled: true in the config (host 127.0.0.1 is enough for the
 # check, 0.0.0.0 to let Prometheus scrape it); set BRIDGE_HEALTH_URL for another port.
 # Without metrics, turn the check off (compose: healthcheck: {disable: true}).
