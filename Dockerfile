@@ -50,7 +50,8 @@ LABEL org.opencontainers.image.title="modbus-mqtt-bridge" \
 # An unprivileged user in the dialout group, which owns serial devices (/dev/ttyUSB*,
 # /dev/ttyAMA*) on Debian-style hosts. A device passed with --device keeps the host's
 # group id; if the host's dialout is not gid 20, add that gid with --group-add.
-RUN useradd --system --uid 10001 --user-group --groups dialout \
+RUN groupadd --system --gid 10001 bridge \
+ && useradd --system --uid 10001 --gid bridge --groups dialout \
         --home-dir /nonexistent --no-create-home --shell /usr/sbin/nologin bridge
 
 COPY --from=build /opt/venv /opt/venv
@@ -64,7 +65,9 @@ ENV PATH=/opt/venv/bin:$PATH \
 # the MQTT password file if you use one.
 VOLUME ["/config"]
 WORKDIR /config
-USER bridge:bridge
+# Numeric, so that runtimes can verify it is not root (Kubernetes runAsNonRoot); the
+# uid alone keeps the supplementary dialout group of the passwd entry.
+USER 10001
 
 # Prometheus metrics (config bridge.metrics: {enabled: true, host: 0.0.0.0, port: 9464}).
 EXPOSE 9464
