@@ -35,9 +35,11 @@ from bridge.core.discovery import (
 )
 from bridge.core.entity import PollClass
 from bridge.core.health_report import HealthReporter
+from bridge.core.management_request import response
 from bridge.core.state import plain_payload, published, state_document
 from bridge.core.topics import Action, Topics
 from bridge.errors import BridgeError, MissingDataError, ValueRejectedError
+from bridge.management import Management
 from bridge.metrics import serve_metrics
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
@@ -67,6 +69,10 @@ class Bridge:
         self._group: asyncio.TaskGroup | None = None
         self._health = HealthReporter()  # rates since the previous report
         self.mqtt_state = "connecting"  # "online" while connected, "offline" between
+        self.management = Management(
+            loaded, self.engine, on_reload=self._reloaded, mqtt_state=lambda: self.mqtt_state
+        )
+        self._republish = False
 
     # --- running ----------------------------------------------------------------------
 
@@ -88,7 +94,9 @@ class Bridge:
 
     async def _session(self, client: MqttClient) -> None:
         """One connection: subscribe, clean up, publish everything, then serve."""
-        await client.subscribe(*self.topics.command_filters(), qos=max(1, self.mqtt.qos))
+        filters = (*self.topics.command_filters(), self.topics.bridge_requests)
+        await client.subscribe(*filters, qos=max(1, self.mqtt.qos))
+        await self._publish_info(client)
         await self._publish_discovery(client, clear_stale=True)
         await self._publish_everything(client)
         try:
@@ -127,6 +135,11 @@ class Bridge:
         self._wake.set()
 
     async def _flush(self, client: MqttClient) -> None:
+        if self._republish:  # after a mapping reload: new entities, new discovery
+            self._republish = False
+            await self._publish_info(client)
+            await self._publish_discovery(client, clear_stale=True)
+            await self._publish_everything(client)
         dirty, self._dirty = self._dirty, {}
         devices_changed = False
         for device_id, keys in dirty.items():
@@ -282,6 +295,10 @@ class Bridge:
     # --- commands ---------------------------------------------------------------------
 
     async def _handle(self, client: MqttClient, message: Message) -> None:
+        request = self.topics.parse_request(message.topic)
+        if request is not None:
+            self._spawn(self._answer(request, message.payload))
+            return
         if message.topic == self.topics.ha_status:
             if message.payload.strip() == b"online":
                 log.info("Home Assistant is online: publishing discovery and state again")
@@ -360,6 +377,31 @@ class Bridge:
         await poller.read_now(keys)
         self._dirty.setdefault(device_id, set())
         self._wake.set()
+
+    # --- management -------------------------------------------------------------------
+
+    async def _answer(self, command: str, payload: bytes) -> None:
+        """Run one management request and queue its response."""
+        try:
+            answer = await self.management.handle(command, payload)
+        except Exception as exc:  # a request must never stop the bridge
+            log.exception("management request %s failed", command)
+            answer = response(error=f"internal error: {exc}")
+        topic = self.topics.bridge_response(command)
+        self._outbox.append(Publish(topic, answer, retain=False))
+        self._wake.set()
+
+    async def _reloaded(self, device_ids: list[str]) -> None:
+        log.info("mappings reloaded for %s", ", ".join(device_ids))
+        for device_id in device_ids:
+            self._discovery.pop(device_id, None)
+            self._dirty.pop(device_id, None)
+        self._republish = True
+        self._wake.set()
+
+    async def _publish_info(self, client: MqttClient) -> None:
+        info = json.dumps(self.management.info(), default=str)
+        await client.publish(self.topics.bridge_info, info, retain=True)
 
     def _error(self, device_id: str, key: str | None, value: object, error: str) -> None:
         log.info("%s %s=%r refused: %s", device_id, key, value, error)

@@ -10,13 +10,15 @@ touches another bus.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
 from collections.abc import Callable, Iterable
 
-from bridge.config import LoadedConfig, SerialBus, TcpBus
+from bridge.config import DeviceConfig, LoadedConfig, SerialBus, TcpBus
 from bridge.core.codec import Value
 from bridge.core.health import HealthPolicy
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, WriteSnapshot
+from bridge.core.mapping import Mapping
 from bridge.core.timing import LinkTiming
 from bridge.errors import ValueRejectedError
 from bridge.modbus.poller import DEFAULT_POLICY, DevicePoller, DeviceUpdate
@@ -55,29 +57,53 @@ class Engine:
             timing = link_timing(bus)
             gap = timing.silence if isinstance(bus, SerialBus) else 0.0
             self.schedulers[bus.id] = BusScheduler(Transport(bus), gap)
-        buses = {bus.id: bus for bus in config.buses}
+        self._buses = {bus.id: bus for bus in config.buses}
+        self._on_update = on_update
+        self._policy = policy
+        self._group: asyncio.TaskGroup | None = None
+        self._tasks: dict[str, asyncio.Task[None]] = {}
         for device in config.devices:
-            if not device.enabled:
-                continue
-            bus = buses[device.bus]
-            self.devices[device.id] = DevicePoller(
-                device,
-                loaded.mappings[device.id],
-                self.schedulers[bus.id],
-                timing=link_timing(bus),
-                timeout=bus.timeout,
-                retries=bus.retries,
-                on_update=on_update,
-                policy=policy,
-            )
+            if device.enabled:
+                self.devices[device.id] = self._poller(device, loaded.mappings[device.id])
+
+    def _poller(self, device: DeviceConfig, mapping: Mapping) -> DevicePoller:
+        bus = self._buses[device.bus]
+        return DevicePoller(
+            device,
+            mapping,
+            self.schedulers[bus.id],
+            timing=link_timing(bus),
+            timeout=bus.timeout,
+            retries=bus.retries,
+            on_update=self._on_update,
+            policy=self._policy,
+        )
 
     async def run(self) -> None:
         """Run every scheduler and poller until cancelled."""
         async with asyncio.TaskGroup() as group:
+            self._group = group
             for bus_id, scheduler in self.schedulers.items():
                 group.create_task(scheduler.run(), name=f"bus:{bus_id}")
             for device_id, poller in self.devices.items():
-                group.create_task(poller.run(), name=f"device:{device_id}")
+                self._tasks[device_id] = group.create_task(poller.run(), name=f"device:{device_id}")
+
+    async def replace_mapping(self, device_id: str, mapping: Mapping) -> DevicePoller:
+        """Poll ``device_id`` with ``mapping`` from now on: its poller starts afresh (values,
+        health and learnt refusals), the bus and the other devices carry on untouched."""
+        old = self.device(device_id)
+        task = self._tasks.pop(device_id, None)
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        poller = self._poller(old.device, mapping)
+        self.devices[device_id] = poller
+        if self._group is not None:
+            self._tasks[device_id] = self._group.create_task(
+                poller.run(), name=f"device:{device_id}"
+            )
+        return poller
 
     def device(self, device_id: str) -> DevicePoller:
         if device_id not in self.devices:

@@ -1,0 +1,157 @@
+"""Requests of the management API (``<base>/bridge/request/<cmd>``) and their responses. Pure.
+
+Every request is a JSON object (an empty payload counts as ``{}``) with an optional
+``transaction`` that the response echoes, Zigbee2MQTT style::
+
+    modbus/bridge/request/device/read   {"bus": "rs485", "unit": 3, "address": 0, "count": 4,
+                                         "transaction": "t1"}
+    modbus/bridge/response/device/read  {"status": "ok", "data": {...}, "error": null,
+                                         "transaction": "t1"}
+
+``parse_request`` validates a payload for its command and raises RequestError with a
+message naming the field; ``response`` builds the answer.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from typing import Any, Literal, Self
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from bridge.core.duration import Duration
+from bridge.core.mapping import format_validation_errors
+from bridge.errors import BridgeError
+
+Transaction = str | int | None
+MAX_SCAN_TIMEOUT = 5.0
+_UNITS = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+))?\s*$")
+
+
+class RequestError(BridgeError):
+    """A management request that cannot be run; ``transaction`` is echoed in the answer."""
+
+    def __init__(self, message: str, transaction: Transaction = None) -> None:
+        super().__init__(message)
+        self.transaction = transaction
+
+
+class Request(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    transaction: Transaction = None
+
+
+class Target(Request):
+    """One unit: a configured ``device``, or ``unit`` on ``bus`` (the only bus if omitted)."""
+
+    device: str | None = None
+    bus: str | None = None
+    unit: int | None = Field(None, ge=0, le=255)
+    timeout: Duration | None = Field(None, le=MAX_SCAN_TIMEOUT)
+
+    @model_validator(mode="after")
+    def _device_or_unit(self) -> Self:
+        if self.device is None and self.unit is None:
+            raise ValueError("give a configured device, or a unit (and its bus)")
+        if self.device is not None and (self.unit is not None or self.bus is not None):
+            raise ValueError("give either device, or bus and unit, not both")
+        return self
+
+
+class DeviceRead(Target):
+    """Raw registers or bits, with every interpretation (a commissioning aid)."""
+
+    table: Literal["holding", "input", "coil", "discrete"] = "holding"
+    address: int = Field(ge=0, le=0xFFFF, description="wire address, 0-based")
+    count: int = Field(1, ge=1, le=2000)
+
+
+class DeviceWrite(Target):
+    """Raw register or coil values, written as given (needs bridge.allow_raw_writes)."""
+
+    table: Literal["holding", "coil"] = "holding"
+    address: int = Field(ge=0, le=0xFFFF, description="wire address, 0-based")
+    values: list[int] = Field(min_length=1, max_length=1968)
+
+
+class DeviceScan(Request):
+    """Which unit ids answer on a bus: ``units`` like ``"1-247"`` or ``[1, 2, 10]``."""
+
+    bus: str | None = None
+    units: str | list[int] = "1-247"
+    timeout: Duration | None = Field(None, gt=0, le=MAX_SCAN_TIMEOUT)
+
+    def unit_ids(self) -> list[int]:
+        return parse_units(self.units)
+
+
+class MappingReload(Request):
+    """Read the mapping files again (all devices, or those listed) and apply them."""
+
+    devices: list[str] | None = None
+
+
+class HealthCheck(Request):
+    """Is the bridge working: MQTT, buses, devices online."""
+
+
+REQUESTS: dict[str, type[Request]] = {
+    "device/read": DeviceRead,
+    "device/write": DeviceWrite,
+    "device/scan": DeviceScan,
+    "mapping/reload": MappingReload,
+    "health_check": HealthCheck,
+}
+
+
+def parse_request(command: str, payload: bytes) -> Request:
+    """The validated request; RequestError (with the transaction if one was readable)."""
+    try:
+        data = json.loads(payload) if payload.strip() else {}
+    except (ValueError, UnicodeDecodeError):
+        raise RequestError("the payload is not JSON; send an object like {}") from None
+    if not isinstance(data, dict):
+        raise RequestError("the payload must be a JSON object")
+    transaction = data.get("transaction")
+    if not isinstance(transaction, str | int) or isinstance(transaction, bool):
+        transaction = None
+    model = REQUESTS.get(command)
+    if model is None:
+        known = ", ".join(sorted(REQUESTS))
+        raise RequestError(f"unknown request {command!r} (known: {known})", transaction)
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise RequestError("; ".join(format_validation_errors(exc)), transaction) from None
+
+
+def parse_units(spec: str | list[int]) -> list[int]:
+    """``"1-10,20"`` or ``[1, 2]`` -> sorted unique unit ids in 1..247; ValueError if not."""
+    if isinstance(spec, list):
+        units = set(spec)
+    else:
+        units = set()
+        for part in spec.split(","):
+            match = _UNITS.match(part)
+            if match is None:
+                raise RequestError(f"units: {part.strip()!r} is not a unit or a range like 1-247")
+            first, last = int(match.group(1)), int(match.group(2) or match.group(1))
+            units.update(range(first, last + 1))
+    if not units or min(units) < 1 or max(units) > 247:
+        raise RequestError("units: unit ids are 1..247")
+    return sorted(units)
+
+
+def response(
+    data: object = None, *, error: str | None = None, transaction: Transaction = None
+) -> str:
+    """The JSON answer: ``{status, data, error, transaction}``."""
+    document: dict[str, Any] = {
+        "status": "error" if error is not None else "ok",
+        "data": {} if data is None else data,
+        "error": error,
+        "transaction": transaction,
+    }
+    return json.dumps(document, default=str)

@@ -1,0 +1,253 @@
+"""The management API: ``<base>/bridge/request/<cmd>`` run against the live engine.
+
+``Management.handle(command, payload)`` validates a request (bridge/core/management_request.py)
+and answers with the JSON of ``<base>/bridge/response/<cmd>``; nothing reaches a bus
+unless the request is valid. Raw reads, writes and scans go through the bus's own
+scheduler, so they never collide with polling: reads and writes queue ahead of polls,
+scan probes queue with them (a scan of a busy bus does not stop its devices' polling).
+``info()`` is the retained ``<base>/bridge/info`` document.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from bridge import __version__
+from bridge.config import LoadedConfig, config_schema
+from bridge.core.management_request import (
+    REQUESTS,
+    DeviceRead,
+    DeviceScan,
+    DeviceWrite,
+    HealthCheck,
+    MappingReload,
+    Request,
+    RequestError,
+    Target,
+    Transaction,
+    parse_request,
+    response,
+)
+from bridge.core.mapping import (
+    Mapping,
+    builtin_mapping_names,
+    load_mapping,
+    mapping_schema,
+    resolve_mapping_path,
+)
+from bridge.errors import BridgeError, InputError, ModbusError
+from bridge.modbus.commission import (
+    explain,
+    raw_read,
+    raw_write,
+    read_interpreted,
+    scan,
+    scheduler_submit,
+)
+from bridge.modbus.engine import Engine
+from bridge.modbus.scheduler import BusScheduler, Priority
+
+Reloaded = Callable[[list[str]], Awaitable[None]]
+
+
+class Management:
+    """Runs management requests for one bridge."""
+
+    def __init__(
+        self,
+        loaded: LoadedConfig,
+        engine: Engine,
+        *,
+        on_reload: Reloaded,
+        mqtt_state: Callable[[], str],
+    ) -> None:
+        self.loaded = loaded
+        self.engine = engine
+        self.settings = loaded.config.bridge
+        self._on_reload = on_reload
+        self._mqtt_state = mqtt_state
+        self._reloading = asyncio.Lock()
+
+    async def handle(self, command: str, payload: bytes) -> str:
+        """The response JSON for one request (never raises for a bad request)."""
+        transaction: Transaction = None
+        try:
+            request = parse_request(command, payload)
+            transaction = request.transaction
+            data = await self._run(request)
+        except RequestError as exc:
+            return response(error=str(exc), transaction=exc.transaction or transaction)
+        except ModbusError as exc:
+            unit = getattr(request, "unit", None)
+            message = explain(unit, exc) if isinstance(unit, int) else str(exc)
+            return response(error=message, transaction=transaction)
+        except BridgeError as exc:
+            return response(error=str(exc), transaction=transaction)
+        return response(data, transaction=transaction)
+
+    async def _run(self, request: Request) -> Any:
+        if isinstance(request, DeviceRead):
+            return await self._read(request)
+        if isinstance(request, DeviceWrite):
+            return await self._write(request)
+        if isinstance(request, DeviceScan):
+            return await self._scan(request)
+        if isinstance(request, MappingReload):
+            return await self._reload(request)
+        if isinstance(request, HealthCheck):
+            return self.health_check()
+        raise RequestError(f"no handler for {type(request).__name__}")  # pragma: no cover
+
+    # --- raw access ---------------------------------------------------------------------
+
+    def _target(self, request: Target) -> tuple[BusScheduler, int, float]:
+        """The scheduler, unit and timeout a request addresses."""
+        if request.device is not None:
+            poller = self.engine.devices.get(request.device)
+            if poller is None:
+                raise RequestError(f"device: no device {request.device!r}")
+            scheduler, unit = poller.scheduler, poller.device.unit
+        else:
+            scheduler, unit = self._bus(request.bus), request.unit or 0  # validated: given
+        bus = scheduler.transport.bus
+        return scheduler, unit, request.timeout or bus.timeout
+
+    def _bus(self, bus_id: str | None) -> BusScheduler:
+        schedulers = self.engine.schedulers
+        if bus_id is None:
+            if len(schedulers) != 1:
+                raise RequestError(f"bus: name one of {sorted(schedulers)}")
+            return next(iter(schedulers.values()))
+        if bus_id not in schedulers:
+            raise RequestError(f"bus: no bus {bus_id!r} (have {sorted(schedulers)})")
+        return schedulers[bus_id]
+
+    async def _read(self, request: DeviceRead) -> dict[str, Any]:
+        scheduler, unit, timeout = self._target(request)
+        read = raw_read(request.table, request.address, request.count)
+        reading = await read_interpreted(scheduler_submit(scheduler), unit, read, timeout)
+        return {"bus": scheduler.bus_id, **reading}
+
+    async def _write(self, request: DeviceWrite) -> dict[str, Any]:
+        if not self.settings.allow_raw_writes:
+            raise RequestError(
+                "raw writes are off: set bridge.allow_raw_writes: true in the config"
+            )
+        scheduler, unit, timeout = self._target(request)
+        write = raw_write(request.table, request.address, request.values)
+        await scheduler_submit(scheduler, Priority.WRITE)(unit, write, timeout)
+        return {
+            "bus": scheduler.bus_id,
+            "unit": unit,
+            "table": request.table,
+            "address": request.address,
+            "function": write.function,
+            "values": list(request.values),
+        }
+
+    async def _scan(self, request: DeviceScan) -> dict[str, Any]:
+        scheduler = self._bus(request.bus)
+        units = request.unit_ids()
+        timeout = request.timeout or self.settings.scan_timeout
+        known = {
+            p.device.unit: device_id
+            for device_id, p in self.engine.devices.items()
+            if p.scheduler is scheduler
+        }
+        found = await scan(scheduler_submit(scheduler, Priority.POLL), units, timeout)
+        return {
+            "bus": scheduler.bus_id,
+            "probed": len(units),
+            "found": [
+                {
+                    "unit": f.unit,
+                    "answer": f.answer.value,
+                    "exception_code": f.exception_code,
+                    "detail": f.detail,
+                    "latency_ms": round(f.latency * 1000, 1),
+                    "device": known.get(f.unit),
+                }
+                for f in found
+            ],
+        }
+
+    # --- mappings -------------------------------------------------------------------------
+
+    async def _reload(self, request: MappingReload) -> dict[str, Any]:
+        devices = self.engine.devices
+        wanted = request.devices if request.devices is not None else list(devices)
+        unknown = [d for d in wanted if d not in devices]
+        if unknown:
+            raise RequestError(f"devices: no such devices {unknown}")
+        async with self._reloading:
+            fresh = self._load_mappings(wanted)  # all or nothing: errors change nothing
+            changed = [d for d in wanted if fresh[d] != devices[d].mapping]
+            for device_id in changed:
+                await self.engine.replace_mapping(device_id, fresh[device_id])
+                self.loaded.mappings[device_id] = fresh[device_id]
+            if changed:
+                await self._on_reload(changed)
+        return {"reloaded": wanted, "changed": changed}
+
+    def _load_mappings(self, device_ids: list[str]) -> dict[str, Mapping]:
+        """The mapping of each device read again, checked against its options."""
+        base = self.loaded.path.parent
+        loaded: dict[str, Mapping] = {}
+        errors: list[str] = []
+        for device_id in device_ids:
+            device = self.engine.devices[device_id].device
+            try:
+                mapping = load_mapping(resolve_mapping_path(device.mapping, base))
+            except InputError as exc:
+                errors.append(f"{device_id}: {exc.source}: {'; '.join(exc.issues)}")
+                continue
+            for name, value in device.options.items():
+                spec = mapping.options.get(name)
+                if spec is None or value not in spec.choices:
+                    errors.append(f"{device_id}: option {name}={value!r} is not in the mapping")
+            loaded[device_id] = mapping
+        if errors:
+            raise RequestError("nothing reloaded: " + "; ".join(errors))
+        return loaded
+
+    # --- state of the bridge --------------------------------------------------------------
+
+    def health_check(self) -> dict[str, Any]:
+        """Healthy while MQTT is up and no bus is down; offline devices are listed."""
+        snapshot = self.engine.snapshot()
+        down = [b.bus_id for b in snapshot.buses if not b.connected and b.requests]
+        online = [d for d, p in self.engine.devices.items() if p.health.online]
+        offline = [d for d, p in self.engine.devices.items() if p.health.online is False]
+        return {
+            "healthy": self._mqtt_state() == "online" and not down,
+            "mqtt": self._mqtt_state(),
+            "buses_down": down,
+            "devices_online": online,
+            "devices_offline": offline,
+            "uptime_s": round(snapshot.uptime, 1),
+        }
+
+    def info(self) -> dict[str, Any]:
+        """``<base>/bridge/info``: version, the config without secrets, schemas, mappings."""
+        config = self.loaded.config
+        in_use = {
+            device_id: {
+                "mapping": p.device.mapping,
+                "manufacturer": p.mapping.manufacturer,
+                "model": p.mapping.model,
+                "entities": len(p.points),
+            }
+            for device_id, p in self.engine.devices.items()
+        }
+        return {
+            "version": __version__,
+            "config_file": str(self.loaded.path),
+            "config": config.model_dump(mode="json"),
+            "mappings": {"shipped": builtin_mapping_names(), "in_use": in_use},
+            "requests": sorted(REQUESTS),
+            "raw_writes": self.settings.allow_raw_writes,
+            "config_schema": config_schema(),
+            "mapping_schema": mapping_schema(),
+        }

@@ -1,0 +1,166 @@
+"""``modbus-mqtt-bridge demo`` as a user runs it: five devices on MQTT, then Ctrl-C.
+
+Each run is a real process: simulator, bridge and (for the embedded case) the amqtt
+broker inside it, checked from outside through a second MQTT client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import pty
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from bridge.config import MqttConfig
+from bridge.demo import SEEDS
+from bridge.mqtt import MqttClient
+from tests.integration.mosquitto import Broker
+from tests.integration.test_simulate_cli import free_port
+
+DEVICES = {seed.id for seed in SEEDS}
+
+
+@contextmanager
+def demo(*args: str) -> Iterator[subprocess.Popen[str]]:
+    command = [sys.executable, "-m", "bridge.cli", "demo", "--plain", "--modbus-port", "0"]
+    with subprocess.Popen(
+        [*command, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    ) as process:
+        try:
+            yield process
+        finally:
+            if process.poll() is None:
+                process.kill()
+
+
+async def read_until(process: subprocess.Popen[str], prefix: str, within: float = 30) -> list[str]:
+    """Lines of the demo's output up to the first that starts with ``prefix``."""
+    assert process.stdout is not None
+    lines: list[str] = []
+    async with asyncio.timeout(within):
+        while not lines or not lines[-1].startswith(prefix):
+            line = await asyncio.to_thread(process.stdout.readline)
+            assert line, f"demo ended early: {lines}"
+            lines.append(line.rstrip("\n"))
+    return lines
+
+
+async def stop(process: subprocess.Popen[str]) -> str:
+    """Ctrl-C; the demo must end cleanly and say so."""
+    process.send_signal(signal.SIGINT)
+    out, err = await asyncio.wait_for(asyncio.to_thread(process.communicate), 20)
+    assert process.returncode == 0, err
+    assert "Traceback" not in err
+    return out
+
+
+async def retained(url: str, pattern: str, version: str = "5") -> dict[str, bytes]:
+    config = MqttConfig(url=url, version=version)  # type: ignore[arg-type]
+    async with MqttClient(config, will_topic="observer/state", client_id="observer") as client:
+        return await client.retained(pattern)
+
+
+def discovered(configs: dict[str, bytes]) -> set[str]:
+    """Device ids with a device-based discovery config (the bridge's own is not one)."""
+    found = set()
+    for topic, payload in configs.items():
+        if payload:
+            device_id = topic.split("/")[2]
+            assert json.loads(payload)["cmps"], topic
+            found.add(device_id)
+    return found - {"modbus"}
+
+
+async def discovery_of_every_device(url: str, version: str = "5") -> None:
+    """Every seed device's discovery config arrives (bounded)."""
+    found: set[str] = set()
+    async with asyncio.timeout(15):
+        while found != DEVICES:
+            found = discovered(await retained(url, "homeassistant/device/+/config", version))
+            await asyncio.sleep(0.2)
+
+
+@pytest.mark.asyncio
+async def test_demo_on_a_given_broker_publishes_five_devices_and_stops(
+    mosquitto: Broker,
+) -> None:
+    with demo("--mqtt-url", mosquitto.url) as process:
+        lines = await read_until(process, "ready:")
+        assert f"MQTT broker: {mosquitto.url} (given)" in lines
+        assert {line.split(":")[0] for line in lines if ": online (" in line} == DEVICES
+        await discovery_of_every_device(mosquitto.url)
+        state = await retained(mosquitto.url, "modbus/borehole_pump")
+        assert "status" in json.loads(state["modbus/borehole_pump"])
+        assert (await stop(process)).rstrip().endswith("demo stopped")
+    after = await retained(mosquitto.url, "modbus/bridge/state")
+    assert after == {"modbus/bridge/state": b"offline"}
+
+
+@pytest.mark.asyncio
+async def test_demo_uses_a_local_broker_that_answers(mosquitto: Broker) -> None:
+    with demo("--local-broker", f"127.0.0.1:{mosquitto.port}") as process:
+        lines = await read_until(process, "ready:")
+        assert f"MQTT broker: {mosquitto.url} (local)" in lines
+        await stop(process)
+
+
+@pytest.mark.asyncio
+async def test_demo_starts_an_embedded_broker_when_none_answers() -> None:
+    port = free_port()
+    with demo("--local-broker", f"127.0.0.1:{port}") as process:
+        lines = await read_until(process, "ready:")
+        url = f"mqtt://127.0.0.1:{port}"
+        assert f"MQTT broker: {url} (embedded)" in lines
+        await discovery_of_every_device(url, version="3.1.1")
+        await stop(process)
+
+
+def test_a_bad_local_broker_address_is_refused_before_anything_starts() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "bridge.cli", "demo", "--local-broker", "nowhere"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+    assert result.returncode == 2
+    assert "--local-broker" in result.stderr and "HOST:PORT" in result.stderr
+
+
+@pytest.mark.asyncio
+async def test_demo_in_a_terminal_shows_the_live_table(mosquitto: Broker) -> None:
+    """On a terminal the default view is the live table: every device shows up online."""
+    main, side = pty.openpty()
+    command = [sys.executable, "-m", "bridge.cli", "demo", "--modbus-port", "0"]
+    env = os.environ | {"COLUMNS": "200", "LINES": "50", "TERM": "xterm"}
+    with subprocess.Popen(
+        [*command, "--mqtt-url", mosquitto.url],
+        stdout=side,
+        stderr=subprocess.PIPE,
+        env=env,
+        cwd=Path(__file__).parents[2],
+    ) as process:
+        os.close(side)
+        screen = ""
+        try:
+            async with asyncio.timeout(30):
+                while screen.count("online") < len(DEVICES) + 1:  # devices + "MQTT online"
+                    chunk = await asyncio.to_thread(os.read, main, 65536)
+                    screen = screen[-20000:] + chunk.decode(errors="replace")
+            for device_id in DEVICES:
+                assert device_id in screen
+            process.send_signal(signal.SIGINT)
+            await asyncio.wait_for(asyncio.to_thread(process.wait), 20)
+            assert process.returncode == 0
+        finally:
+            if process.poll() is None:
+                process.kill()
+            os.close(main)
