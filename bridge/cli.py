@@ -25,7 +25,7 @@ from bridge.core.mapping import (
     resolve_mapping_path,
 )
 from bridge.errors import InputError
-from bridge.lifecycle import configure_logging, until_stopped
+from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 
 EXIT_OK = 0
 EXIT_INVALID = 2
@@ -84,7 +84,7 @@ def _parser() -> argparse.ArgumentParser:
     validate.set_defaults(handler=_validate)
     run = commands.add_parser("run", help="run the bridge: poll devices, publish to MQTT")
     run.add_argument("-c", "--config", type=Path, required=True, metavar="FILE")
-    run.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
+    add_logging_arguments(run)
     run.set_defaults(handler=_run)
     simulate_cli.add_parser(commands)
     commission_cli.add_parsers(commands)
@@ -96,7 +96,7 @@ def _run(args: argparse.Namespace, _: TextIO) -> int:
     from bridge.app import Bridge  # noqa: PLC0415 - the MQTT stack loads only for `run`
 
     loaded = load_config(args.config)
-    configure_logging(args.log_level)
+    configure_logging(args.log_level, args.log_format)
     asyncio.run(until_stopped(Bridge(loaded).run()))
     return EXIT_OK
 

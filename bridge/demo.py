@@ -24,7 +24,7 @@ from bridge.config import LoadedConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.demo_view import DemoView, render_plain, render_table
 from bridge.errors import BridgeError, InputError
-from bridge.lifecycle import configure_logging, until_stopped
+from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.mqtt.broker import PROTOCOL, embedded_broker
 
@@ -83,9 +83,7 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     demo.add_argument(
         "--plain", action="store_true", help="print state changes as lines, no live table"
     )
-    demo.add_argument(
-        "--log-level", default="warning", choices=("debug", "info", "warning", "error")
-    )
+    add_logging_arguments(demo, level="warning")
     demo.set_defaults(handler=run_demo)
 
 
@@ -93,7 +91,7 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
     host, _, port = args.local_broker.rpartition(":")
     if not host or not port.isdigit():
         raise InputError("--local-broker", [f"use HOST:PORT, not {args.local_broker!r}"])
-    configure_logging(args.log_level)
+    configure_logging(args.log_level, args.log_format)
     try:
         asyncio.run(until_stopped(demo(args, out)))
     except ExceptionGroup as failed:

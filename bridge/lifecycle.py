@@ -1,20 +1,67 @@
-"""Process lifecycle for long-running commands: logging set-up and clean stops."""
+"""Process lifecycle for long-running commands: logging set-up and clean stops.
+
+Logs go to stderr as plain lines, or as one JSON object per line (``--log-format json``,
+for containers and log shippers): ``time``, ``level``, ``logger``, ``message`` and the
+structured fields a record carries (``event``, ``device``, ``unit``, ``bus``...), plus
+``exception`` with the traceback when there is one.
+"""
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import contextlib
+import json
 import logging
+import os
 import signal
 from collections.abc import Coroutine
+from datetime import UTC, datetime
 from typing import Any
 
 LOG_FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
+LEVELS = ("debug", "info", "warning", "error")
+FORMATS = ("text", "json")
+_STANDARD = frozenset(vars(logging.makeLogRecord({}))) | {"message", "asctime"}
 
 
-def configure_logging(level: str) -> None:
-    """Plain lines on stderr at ``level`` (pymodbus' own chatter stays quiet)."""
-    logging.basicConfig(level=level.upper(), format=LOG_FORMAT)
+class JsonFormatter(logging.Formatter):
+    """One JSON object per record, with the record's extra fields."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        document: dict[str, Any] = {
+            "time": datetime.fromtimestamp(record.created, UTC).isoformat(timespec="milliseconds"),
+            "level": record.levelname.lower(),
+            "logger": record.name,
+            "message": record.getMessage(),
+        }
+        document |= {k: v for k, v in vars(record).items() if k not in _STANDARD}
+        if record.exc_info:
+            document["exception"] = self.formatException(record.exc_info)
+        return json.dumps(document, default=str)
+
+
+def add_logging_arguments(parser: argparse.ArgumentParser, level: str = "info") -> None:
+    """``--log-level`` and ``--log-format``; defaults from BRIDGE_LOG_LEVEL/BRIDGE_LOG_FORMAT."""
+    parser.add_argument(
+        "--log-level",
+        default=os.environ.get("BRIDGE_LOG_LEVEL", level),
+        choices=LEVELS,
+        help="default %(default)s (environment: BRIDGE_LOG_LEVEL)",
+    )
+    parser.add_argument(
+        "--log-format",
+        default=os.environ.get("BRIDGE_LOG_FORMAT", "text"),
+        choices=FORMATS,
+        help="plain lines or one JSON object per line (environment: BRIDGE_LOG_FORMAT)",
+    )
+
+
+def configure_logging(level: str, log_format: str = "text") -> None:
+    """Lines on stderr at ``level`` (pymodbus' own chatter stays quiet)."""
+    handler = logging.StreamHandler()
+    handler.setFormatter(JsonFormatter() if log_format == "json" else logging.Formatter(LOG_FORMAT))
+    logging.basicConfig(level=level.upper(), handlers=[handler], force=True)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 

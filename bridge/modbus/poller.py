@@ -289,20 +289,25 @@ class DevicePoller:
         self._last_traffic = now
         first_contact = self.health.online is None
         transition = self.health.record(outcome, now, latency=latency, code=code)
+        if transition is None:
+            return
+        fields = {"device": self.device.id, "unit": self.device.unit, "bus": self.scheduler.bus_id}
         if transition is Transition.OFFLINE:
+            failures, backoff = self.health.consecutive_failures, self.health.backoff
             log.warning(
                 "%s (unit %d on %s) offline after %d failed requests; retrying every %.1f s "
                 "or later",
-                self.device.id,
-                self.device.unit,
-                self.scheduler.bus_id,
-                self.health.consecutive_failures,
-                self.health.backoff,
+                *fields.values(),
+                failures,
+                backoff,
+                extra=fields
+                | {"event": "device_offline", "failures": failures, "backoff_s": backoff},
             )
-            self._notify(frozenset())
-        elif transition is Transition.ONLINE:
-            log.info("%s %s", self.device.id, "online" if first_contact else "back online")
-            self._notify(frozenset())
+        else:
+            word = "online" if first_contact else "back online"
+            event = "device_online" if first_contact else "device_recovered"
+            log.info("%s %s", self.device.id, word, extra=fields | {"event": event})
+        self._notify(frozenset())
 
     def _publish(self, keys: Iterable[str], fresh: set[Address]) -> None:
         changed: set[str] = set()

@@ -220,13 +220,13 @@ class BusScheduler:
             await self.transport.open()
         except BusError as exc:
             if self._reopen_delay == 0:
-                log.warning("%s", exc)
+                log.warning("%s", exc, extra={"event": "bus_down", "bus": self.bus_id})
             self.counters.reopenings += 1
             self._reopen_delay = min(REOPEN_MAX, max(REOPEN_INITIAL, self._reopen_delay * 2))
             self._reopen_at = time.monotonic() + self._reopen_delay
             raise
         if self._reopen_delay:
-            log.info("%s: bus back", self.bus_id)
+            log.info("%s: bus back", self.bus_id, extra={"event": "bus_up", "bus": self.bus_id})
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
 

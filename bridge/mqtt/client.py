@@ -344,7 +344,11 @@ async def run_with_reconnect(
                 connected = True
                 backoff = backoff_initial
                 if outage is not None:
-                    _log.info("MQTT broker %s reachable again", config.url)
+                    _log.info(
+                        "MQTT broker %s reachable again",
+                        config.url,
+                        extra={"event": "mqtt_up", "broker": config.url},
+                    )
                     outage = None
                 if on_state is not None:
                     on_state("online")
@@ -355,7 +359,12 @@ async def run_with_reconnect(
         if connected and on_state is not None:
             on_state("offline")
         if outage is None:
-            _log.warning("MQTT: %s; retrying with backoff up to %gs", reason, backoff_max)
+            _log.warning(
+                "MQTT: %s; retrying with backoff up to %gs",
+                reason,
+                backoff_max,
+                extra={"event": "mqtt_down", "broker": config.url},
+            )
             outage = reason
         else:
             _log.debug("MQTT still unavailable: %s", reason)
