@@ -16,7 +16,8 @@ before calling the hook (simruntime.py:62-66), which would skip latency and quir
   block (FC01/FC02 pass the exact bit count through a context variable: pymodbus hands
   the hook the number of 16-bit words, simruntime.py:89-93);
 * writes: every write request a live unit receives is appended to ``writes`` (refused ones
-  too), then checked and stored. FC05 arrives through ``_CoilWord``, which passes the raw
+  too) and the moment it arrived (``time.monotonic()``, before any latency) to
+  ``write_times``, then checked and stored. FC05 arrives through ``_CoilWord``, which passes the raw
   16-bit word (pymodbus' own FC05 only knows on/off) and echoes it back;
 * dead units and unknown unit ids: the incoming ``trace_pdu`` hook drops the request, so
   nothing is executed and nothing is sent (requesthandler.py:73 handles no empty PDU);
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import asyncio
 import random
+import time
 from collections.abc import Callable, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
@@ -110,7 +112,7 @@ def two_byte_count_frame(frame: bytes) -> bytes:
 class _Device:
     """One simulated unit: its image, its rules, and the pymodbus hook that applies them."""
 
-    def __init__(self, spec: SimulatedUnit, writes: list[tuple[int, Write]]) -> None:
+    def __init__(self, spec: SimulatedUnit, record: Callable[[int, Write, float], None]) -> None:
         self.unit = spec.unit
         self.mapping = spec.mapping
         self.points = spec.mapping.points(spec.options)
@@ -118,7 +120,7 @@ class _Device:
         self.movers = build_movers(self.points, self.image)
         self.quirks = spec.quirks
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
-        self.writes = writes
+        self.record = record
 
     def set_quirks(self, quirks: Quirks) -> None:
         _check_quirks(quirks)
@@ -150,6 +152,7 @@ class _Device:
         values: list[int] | list[bool] | None,
     ) -> ExcCodes | None:
         """pymodbus' hook, called before every answer (simdevice.py:91-115)."""
+        received = time.monotonic()
         table = _TABLES.get(function_code, Table.HOLDING)
         if values is None and function_code in (5, 6, 15, 16):
             self._fill(table, start, address, count, registers)  # the echo after FC06
@@ -163,7 +166,7 @@ class _Device:
                 self._fill(table, start, address, count, registers)
         else:
             write = Write(function_code, table, address, tuple(int(v) for v in values))
-            self.writes.append((self.unit, write))
+            self.record(self.unit, write, received)
             code = self._refusal(function_code) or self.rules.check_write(write)
             if code is None and not (table is Table.COIL and address in self.rules.commands):
                 self.image |= stored_cells(write)
@@ -194,12 +197,15 @@ def _check_quirks(quirks: Quirks) -> None:
 
 class Simulator:
     """Simulated units on one bus (TCP port or serial line). ``writes`` lists every write
-    request a live unit received, in order, as ``(unit, Write)``: refused ones included."""
+    request a live unit received, in order, as ``(unit, Write)``: refused ones included;
+    ``write_times[i]`` is when ``writes[i]`` arrived (``time.monotonic()``, before the
+    unit's latency), for measuring how long a command took to reach the wire."""
 
     def __init__(self, units: Sequence[SimulatedUnit], *, seed: int = 0, tick: float = 1.0) -> None:
         self.writes: list[tuple[int, Write]] = []
+        self.write_times: list[float] = []
         self.ready = asyncio.Event()
-        self._devices = {spec.unit: _Device(spec, self.writes) for spec in units}
+        self._devices = {spec.unit: _Device(spec, self._record_write) for spec in units}
         self._rng = random.Random(seed)  # noqa: S311 - simulated readings, not secrets
         self._tick = tick
         self._port: int | None = None
@@ -234,6 +240,10 @@ class Simulator:
         """Store ``value`` as the device would report it (ValueRejectedError if it cannot)."""
         device = self._device(unit)
         device.image |= words_for(device.point(key), value, device.image)
+
+    def _record_write(self, unit: int, write: Write, received: float) -> None:
+        self.writes.append((unit, write))
+        self.write_times.append(received)
 
     def _device(self, unit: int) -> _Device:
         try:

@@ -287,6 +287,22 @@ async def test_latency_delays_every_answer() -> None:
 
 
 @pytest.mark.asyncio
+async def test_write_times_stamp_each_write_on_arrival_before_the_latency() -> None:
+    sim = simulator((1, "soft_starter"), latency=0.2)
+    writes = [Write(6, Table.HOLDING, 0x1030, (v,)) for v in (1, 0)]
+    sent, answered = [], []
+    async with tcp(sim) as conn:
+        for write in writes:
+            sent.append(time.monotonic())
+            await call(conn, write)
+            answered.append(time.monotonic())
+    assert sim.writes == [(1, w) for w in writes]
+    assert len(sim.write_times) == 2
+    for stamp, before, after in zip(sim.write_times, sent, answered, strict=True):
+        assert before <= stamp <= after - 0.2  # on arrival, the latency still to come
+
+
+@pytest.mark.asyncio
 async def test_two_byte_count_on_rtu() -> None:
     sim = simulator((1, "p2_vfd"), two_byte_count=True)
     seen: list[bytes] = []
