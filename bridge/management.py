@@ -15,7 +15,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from bridge import __version__
-from bridge.config import LoadedConfig, config_schema
+from bridge.config import DeviceConfig, LoadedConfig, config_schema
 from bridge.core.management_request import (
     REQUESTS,
     DeviceRead,
@@ -181,28 +181,40 @@ class Management:
         unknown = [d for d in wanted if d not in devices]
         if unknown:
             raise RequestError(f"devices: no such devices {unknown}")
+        settings = {d: devices[d].device for d in wanted}
+        if request.mapping is not None:  # one device switches to another mapping
+            (device_id,) = wanted
+            settings[device_id] = settings[device_id].model_copy(
+                update={"mapping": request.mapping}
+            )
         async with self._reloading:
-            fresh = self._load_mappings(wanted)  # all or nothing: errors change nothing
-            changed = [d for d in wanted if fresh[d] != devices[d].mapping]
+            fresh = self._load_mappings(settings)  # all or nothing: errors change nothing
+            changed = [
+                d
+                for d in wanted
+                if fresh[d] != devices[d].mapping or settings[d] != devices[d].device
+            ]
             for device_id in changed:
-                await self.engine.replace_mapping(device_id, fresh[device_id])
+                await self.engine.replace_mapping(device_id, fresh[device_id], settings[device_id])
                 self.loaded.mappings[device_id] = fresh[device_id]
             if changed:
                 await self._on_reload(changed)
         return {"reloaded": wanted, "changed": changed}
 
-    def _load_mappings(self, device_ids: list[str]) -> dict[str, Mapping]:
+    def _load_mappings(self, settings: dict[str, DeviceConfig]) -> dict[str, Mapping]:
         """The mapping of each device read again, checked against its options."""
         base = self.loaded.path.parent
         loaded: dict[str, Mapping] = {}
         errors: list[str] = []
-        for device_id in device_ids:
-            device = self.engine.devices[device_id].device
+        for device_id, device in settings.items():
             try:
                 mapping = load_mapping(resolve_mapping_path(device.mapping, base))
             except InputError as exc:
                 errors.append(f"{device_id}: {exc.source}: {'; '.join(exc.issues)}")
                 continue
+            transport = self.engine.schedulers[device.bus].transport.bus.transport
+            if transport == "ascii" and "ascii" not in mapping.protocol.transports:
+                errors.append(f"{device_id}: {mapping.model} does not speak Modbus ASCII")
             for name, value in device.options.items():
                 spec = mapping.options.get(name)
                 if spec is None or value not in spec.choices:

@@ -88,9 +88,17 @@ class DeviceScan(Request):
 
 
 class MappingReload(Request):
-    """Read the mapping files again (all devices, or those listed) and apply them."""
+    """Read the mapping files again (all devices, or those listed) and apply them; with
+    ``mapping`` (a shipped name or a file), one listed device switches to that mapping."""
 
     devices: list[str] | None = None
+    mapping: str | None = Field(None, min_length=1)
+
+    @model_validator(mode="after")
+    def _one_device_for_a_new_mapping(self) -> Self:
+        if self.mapping is not None and (self.devices is None or len(self.devices) != 1):
+            raise ValueError("mapping: name exactly one device in devices to switch it")
+        return self
 
 
 class HealthCheck(Request):

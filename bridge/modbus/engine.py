@@ -88,16 +88,19 @@ class Engine:
             for device_id, poller in self.devices.items():
                 self._tasks[device_id] = group.create_task(poller.run(), name=f"device:{device_id}")
 
-    async def replace_mapping(self, device_id: str, mapping: Mapping) -> DevicePoller:
-        """Poll ``device_id`` with ``mapping`` from now on: its poller starts afresh (values,
-        health and learnt refusals), the bus and the other devices carry on untouched."""
+    async def replace_mapping(
+        self, device_id: str, mapping: Mapping, device: DeviceConfig | None = None
+    ) -> DevicePoller:
+        """Poll ``device_id`` with ``mapping`` (and ``device``'s settings if given) from now
+        on: its poller starts afresh (values, health and learnt refusals); the bus and the
+        other devices carry on untouched."""
         old = self.device(device_id)
         task = self._tasks.pop(device_id, None)
         if task is not None:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
-        poller = self._poller(old.device, mapping)
+        poller = self._poller(device or old.device, mapping)
         self.devices[device_id] = poller
         if self._group is not None:
             self._tasks[device_id] = self._group.create_task(

@@ -266,6 +266,43 @@ async def test_mapping_reload_applies_a_changed_file_and_refuses_a_broken_one(
 
 
 @pytest.mark.asyncio
+async def test_mapping_reload_switches_a_device_to_a_new_mapping(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """Commissioning: a device gets the mapping just written for it, without a restart."""
+    written = builtin_mapping_path("soft_starter").read_text()
+    (tmp_path / "starter.yaml").write_text(
+        written.replace("name: Fault reset\n", "name: Reset the fault\n", 1)
+    )
+    async with site(mosquitto, tmp_path) as (bridge, _), client_of(mosquitto) as tester:
+        await online(bridge, tester)
+        topic = "homeassistant/device/starter/config"
+        await eventually(lambda: topic in tester.retained, 10)
+        assert tester.json(topic)["cmps"]["fault_reset"]["name"] == "Fault reset"
+
+        for body, words in [
+            ({"mapping": "starter.yaml"}, "exactly one device"),
+            ({"devices": ["pump", "starter"], "mapping": "starter.yaml"}, "exactly one device"),
+            ({"devices": ["starter"], "mapping": "missing.yaml"}, "missing.yaml"),
+        ]:
+            refused = await request(tester, "mapping/reload", body)
+            assert refused["status"] == "error" and words in refused["error"], refused
+
+        before = len(tester.log)
+        switched = await request(
+            tester, "mapping/reload", {"devices": ["starter"], "mapping": "starter.yaml"}
+        )
+        assert switched["data"] == {"reloaded": ["starter"], "changed": ["starter"]}
+        await eventually(lambda: tester.after(before, topic), 10)
+        assert tester.json(topic)["cmps"]["fault_reset"]["name"] == "Reset the fault"
+        assert bridge.engine.devices["starter"].device.mapping == "starter.yaml"
+        await eventually(lambda: tester.after(before, "modbus/bridge/devices"), 10)
+        listing = {d["id"]: d for d in tester.json("modbus/bridge/devices")}
+        assert listing["starter"]["mapping"] == "starter.yaml"
+        await online(bridge)
+
+
+@pytest.mark.asyncio
 async def test_health_check_answers(mosquitto: Broker, tmp_path: Path) -> None:
     async with site(mosquitto, tmp_path) as (bridge, _), client_of(mosquitto) as tester:
         await online(bridge, tester)
