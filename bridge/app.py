@@ -345,6 +345,7 @@ class Bridge:
         async with lock:
             left = command.expires - time.monotonic()
             if left <= 0:
+                poller.writes.expired += 1
                 self._error(
                     command.device_id,
                     command.key,
@@ -353,6 +354,7 @@ class Bridge:
                 )
                 return
             if poller.health.online is False:
+                poller.writes.rejected += 1
                 self._error(
                     command.device_id,
                     command.key,

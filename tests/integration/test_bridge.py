@@ -241,6 +241,7 @@ async def test_commands_to_an_offline_device_are_refused(mosquitto: Broker) -> N
         await eventually(lambda: observer.after(0, "modbus/vacon_nx/error"))
         error = json.loads(observer.after(0, "modbus/vacon_nx/error")[0].payload)
         assert "offline" in error["error"]
+        assert bridge.engine.devices["vacon_nx"].writes.rejected == 1
         sim.set_quirks(UNITS["vacon_nx"], Quirks())
         await asyncio.sleep(1.0)
         assert not [w for unit, w in sim.writes if unit == UNITS["vacon_nx"]]
@@ -388,3 +389,4 @@ async def test_a_command_that_cannot_run_in_time_is_dropped_not_run_late(
         addresses = {"soft_stop_time": 0x1006, "kick_start_time": 0x100C, "overload_time": 0x1012}
         assert expired
         assert not {addresses[k] for k in expired} & written
+        assert starter.writes.expired == len(expired)
