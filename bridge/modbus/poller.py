@@ -368,8 +368,10 @@ class DevicePoller:
         await self._refresh(_dependencies(point))
         writes = encode(point, value, self.image)
         if entity.eeprom and entity.readable and self._unchanged(point, writes):
-            self.writes.skipped_unchanged += 1
+            self.writes.skipped_unchanged += 1  # the same value again: no wear, no refusal
             return self.values.get(key, decode(point, self.image))
+        if entity.eeprom:
+            self._check_eeprom_rate(point)
         retries = self.retries if entity.idempotent else 0
         for index, write in enumerate(writes):
             await self._submit(
@@ -395,14 +397,16 @@ class DevicePoller:
                 f"{point.key} is a guarded write (dangerous); set allow_dangerous_writes: true "
                 f"for device {self.device.id} to permit it"
             )
-        if entity.eeprom:
-            last = self.writes.last_write.get(point.write_address)
-            wait = self.protocol.eeprom_write_interval
-            if last is not None and time.monotonic() - last < wait:
-                left = wait - (time.monotonic() - last)
-                raise ValueRejectedError(
-                    f"{point.key} is stored in EEPROM: next write allowed in {left:.0f} s"
-                )
+
+    def _check_eeprom_rate(self, point: Point) -> None:
+        """An EEPROM parameter is rewritten at most once per ``eeprom_write_interval``."""
+        last = self.writes.last_write.get(point.write_address)
+        wait = self.protocol.eeprom_write_interval
+        if last is not None and time.monotonic() - last < wait:
+            left = wait - (time.monotonic() - last)
+            raise ValueRejectedError(
+                f"{point.key} is stored in EEPROM: next write allowed in {left:.0f} s"
+            )
 
     async def _refresh(self, reads: list[Read]) -> None:
         fresh: set[Address] = set()

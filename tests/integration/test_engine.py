@@ -220,6 +220,8 @@ async def test_eeprom_parameters_skip_unchanged_writes_and_are_rate_limited() ->
             assert sim.writes == []
             assert starter.writes.skipped_unchanged == 1
             await engine.write("soft_starter_1", "soft_start_time", 25)
+            assert await engine.write("soft_starter_1", "soft_start_time", 25) == 25  # again
+            assert starter.writes.skipped_unchanged == 2
             with pytest.raises(ValueRejectedError, match="next write allowed in"):
                 await engine.write("soft_starter_1", "soft_start_time", 26)
     assert [w.values for _, w in sim.writes] == [(25,)]
