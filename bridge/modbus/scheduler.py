@@ -126,6 +126,9 @@ class BusScheduler:
             while True:
                 job = await self._next_job()
                 await self._serve(job)
+                # let the job's submitter run first: its follow-up (the read-back after a
+                # write, a poll's next block) is queued before the next job is chosen
+                await asyncio.sleep(0)
         finally:
             for job in self._queue:
                 if not job.future.done():
@@ -139,12 +142,13 @@ class BusScheduler:
             now = time.monotonic()
             start = max(now, self._last_end + self.gap)
             ready_at = [(self._unit_ready(job, start), job) for job in self._queue]
-            for when, job in ready_at:
-                if when <= start:
-                    self._queue.remove(job)
-                    if start > now:
-                        await asyncio.sleep(start - now)
-                    return job
+            ready = [job for when, job in ready_at if when <= start]
+            if ready and start > now:
+                await asyncio.sleep(start - now)  # the silence first, then choose: a
+                continue  # command queued meanwhile goes before the polls
+            if ready:
+                self._queue.remove(ready[0])
+                return ready[0]
             earliest = min((when for when, _ in ready_at), default=None)
             self._wakeup.clear()
             delay = None if earliest is None else max(0.0, earliest - now)

@@ -87,6 +87,42 @@ async def test_a_write_waits_only_for_the_transaction_in_flight() -> None:
 
 
 @pytest.mark.asyncio
+async def test_a_read_back_goes_before_the_polls_queued_during_its_write() -> None:
+    transport = ScriptedTransport(gate=asyncio.Event())
+    scheduler, task = await started(transport)
+
+    async def write_then_read_back() -> None:
+        await scheduler.submit(9, WRITE, timeout=1, priority=Priority.WRITE)
+        await scheduler.submit(9, READ, timeout=1, priority=Priority.READ_NOW)
+
+    command = asyncio.create_task(write_then_read_back())
+    await asyncio.sleep(0.01)  # the write is in flight
+    polls = [asyncio.create_task(scheduler.submit(u, READ, timeout=1)) for u in (1, 2)]
+    await asyncio.sleep(0.01)
+    transport.gate.set()
+    await asyncio.gather(command, *polls)
+    assert [(unit, request) for unit, request, _ in transport.calls] == [
+        (9, WRITE),
+        (9, READ),
+        (1, READ),
+        (2, READ),
+    ]
+    await stop(task)
+
+
+@pytest.mark.asyncio
+async def test_a_command_queued_during_the_silence_goes_before_the_polls() -> None:
+    transport = ScriptedTransport()
+    scheduler, task = await started(transport, gap=0.2)
+    polls = [asyncio.create_task(scheduler.submit(u, READ, timeout=1)) for u in (1, 2)]
+    await asyncio.sleep(0.05)  # unit 1 answered; the bus keeps silent before the next frame
+    write = asyncio.create_task(scheduler.submit(9, WRITE, timeout=1, priority=Priority.WRITE))
+    await asyncio.gather(write, *polls)
+    assert [unit for unit, _, _ in transport.calls] == [1, 9, 2]
+    await stop(task)
+
+
+@pytest.mark.asyncio
 async def test_a_resting_unit_does_not_hold_up_the_others() -> None:
     transport = ScriptedTransport()
     scheduler, task = await started(transport)
