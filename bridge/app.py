@@ -14,7 +14,6 @@ optional metrics endpoint serves the same counters for the whole run.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 import time
@@ -23,22 +22,17 @@ from typing import Any
 
 from bridge import __version__
 from bridge.config import LoadedConfig
-from bridge.core.codec import limits_of, unit_of
 from bridge.core.commands import Command, RecentMessages, parse_get, parse_set
 from bridge.core.discovery import (
-    DeviceInfo,
     Origin,
     Publish,
-    build_bridge_discovery,
-    build_discovery,
-    removal,
 )
-from bridge.core.entity import PollClass
 from bridge.core.health_report import HealthReporter
 from bridge.core.management_request import response
 from bridge.core.state import plain_payload, published, state_document
 from bridge.core.topics import Action, Topics
-from bridge.errors import BridgeError, MissingDataError, ValueRejectedError
+from bridge.discovery_publisher import DiscoveryPublisher
+from bridge.errors import BridgeError, ValueRejectedError
 from bridge.management import Management
 from bridge.metrics import serve_metrics
 from bridge.modbus.engine import Engine
@@ -59,11 +53,11 @@ class Bridge:
         self.topics = Topics(config.mqtt.base_topic, config.mqtt.discovery_prefix)
         self.origin = Origin(sw_version=__version__)
         self.engine = Engine(loaded, self._on_update)
+        self.discovery = DiscoveryPublisher(loaded, self.engine, self.topics, self.origin)
         self._wake = asyncio.Event()
         self._dirty: dict[str, set[str]] = {}
         self._outbox: deque[Publish] = deque(maxlen=OUTBOX)
         self._availability: dict[str, str] = {}
-        self._discovery: dict[str, list[Publish]] = {}
         self._recent = RecentMessages(window=max(60.0, 10 * self.mqtt.command_expiry))
         self._locks: dict[str, asyncio.Lock] = {}
         self._group: asyncio.TaskGroup | None = None
@@ -97,7 +91,7 @@ class Bridge:
         filters = (*self.topics.command_filters(), self.topics.bridge_requests)
         await client.subscribe(*filters, qos=max(1, self.mqtt.qos))
         await self._publish_info(client)
-        await self._publish_discovery(client, clear_stale=True)
+        await self.discovery.publish(client, clear_stale=True)
         await self._publish_everything(client)
         try:
             async with asyncio.TaskGroup() as group:
@@ -138,15 +132,15 @@ class Bridge:
         if self._republish:  # after a mapping reload: new entities, new discovery
             self._republish = False
             await self._publish_info(client)
-            await self._publish_discovery(client, clear_stale=True)
+            await self.discovery.publish(client, clear_stale=True)
             await self._publish_everything(client)
         dirty, self._dirty = self._dirty, {}
         devices_changed = False
         for device_id, keys in dirty.items():
             poller = self.engine.devices[device_id]
             devices_changed |= await self._publish_device(client, poller, keys)
-            if keys & self._discovery_sources(poller):
-                await self._publish_discovery(client, only=device_id)
+            if keys & self.discovery.sources(poller):
+                await self.discovery.publish(client, only=device_id)
         if devices_changed:
             await self._publish_devices_list(client)
         while self._outbox:
@@ -195,103 +189,6 @@ class Bridge:
         ]
         await client.publish(self.topics.bridge_devices, json.dumps(listing), retain=True)
 
-    # --- discovery --------------------------------------------------------------------
-
-    def _device_info(self, poller: DevicePoller) -> DeviceInfo:
-        device = poller.device
-        return DeviceInfo(
-            id=device.id,
-            name=device.display_name,
-            mapping=poller.mapping,
-            options=dict(device.options),
-            bus=device.bus,
-            unit=device.unit,
-            allow_dangerous_writes=device.allow_dangerous_writes,
-            fast_interval=poller.intervals[PollClass.FAST],
-            slow_interval=poller.intervals[PollClass.SLOW],
-        )
-
-    @staticmethod
-    def _discovery_sources(poller: DevicePoller) -> set[str]:
-        """Keys whose value changes a discovery payload (units and limits from registers)."""
-        sources: set[str] = set()
-        for point in poller.points.values():
-            for source in (point.unit_source, point.min_source, point.max_source):
-                if source is not None:
-                    sources.add(source.key)
-        return sources
-
-    def _discovery_for(self, poller: DevicePoller) -> list[Publish]:
-        units, limits = {}, {}
-        for key, point in poller.points.items():
-            if point.unit_source is not None:
-                units[key] = unit_of(point, poller.image)
-            if point.min_source is not None or point.max_source is not None:
-                with contextlib.suppress(MissingDataError):
-                    limits[key] = limits_of(point, poller.image)
-        return build_discovery(
-            self._device_info(poller),
-            self.topics,
-            self.origin,
-            mode=self.mqtt.discovery if self.mqtt.discovery != "off" else "device",
-            units=units,
-            limits=limits,
-            state_refresh=self.mqtt.state_refresh,
-        )
-
-    async def _publish_discovery(
-        self, client: MqttClient, *, clear_stale: bool = False, only: str | None = None
-    ) -> None:
-        if self.mqtt.discovery == "off":
-            return
-        health = self.loaded.config.bridge.health_interval > 0  # the sensors read it
-        bridge_messages = build_bridge_discovery(
-            self.topics,
-            self.origin,
-            self.topics.base,
-            buses=list(self.engine.schedulers) if health else [],
-            devices=list(self.engine.devices) if health else [],
-        )
-        wanted: list[Publish] = [] if only else list(bridge_messages)
-        for device_id, poller in self.engine.devices.items():
-            if only is not None and device_id != only:
-                continue
-            messages = self._discovery_for(poller)
-            if only is not None and messages == self._discovery.get(device_id):
-                return  # nothing changed
-            self._discovery[device_id] = messages
-            wanted.extend(messages)
-        if clear_stale:
-            await self._clear_stale(client, {m.topic for m in wanted})
-        for message in wanted:
-            await client.publish(message.topic, message.payload, retain=True)
-
-    async def _clear_stale(self, client: MqttClient, current: set[str]) -> None:
-        """Empty the retained configs this bridge published before but no longer produces."""
-        prefix = self.topics.discovery_prefix
-        found: dict[str, bytes] = {}
-        for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
-            found |= await client.retained(pattern)
-        for topic, payload in found.items():
-            if topic not in current and payload and self._ours(payload):
-                log.info("removing stale discovery config %s", topic)
-                message = removal(topic)
-                await client.publish(message.topic, message.payload, retain=True)
-
-    def _ours(self, payload: bytes) -> bool:
-        try:
-            data = json.loads(payload)
-        except ValueError:
-            return False
-        if not isinstance(data, dict):
-            return False
-        device = data.get("device") or data.get("dev") or {}
-        identifiers = device.get("identifiers") or device.get("ids") or []
-        if isinstance(identifiers, str):
-            identifiers = [identifiers]
-        mark = f"{self.topics.base}_"
-        return any(isinstance(i, str) and i.startswith(mark) for i in identifiers)
-
     # --- commands ---------------------------------------------------------------------
 
     async def _handle(self, client: MqttClient, message: Message) -> None:
@@ -302,7 +199,7 @@ class Bridge:
         if message.topic == self.topics.ha_status:
             if message.payload.strip() == b"online":
                 log.info("Home Assistant is online: publishing discovery and state again")
-                await self._publish_discovery(client)
+                await self.discovery.publish(client)
                 await self._publish_everything(client)
             return
         target = self.topics.parse_command(message.topic)
@@ -396,7 +293,7 @@ class Bridge:
     async def _reloaded(self, device_ids: list[str]) -> None:
         log.info("mappings reloaded for %s", ", ".join(device_ids))
         for device_id in device_ids:
-            self._discovery.pop(device_id, None)
+            self.discovery.forget(device_id)
             self._dirty.pop(device_id, None)
         self._republish = True
         self._wake.set()

@@ -149,7 +149,7 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
             topic = f"homeassistant/device/{name}/config"
             await eventually(  # units and limits read from registers land in discovery
                 lambda p=poller, t=topic: (
-                    observer.json(t) == json.loads(bridge._discovery_for(p)[0].payload)
+                    observer.json(t) == json.loads(bridge.discovery.discovery_for(p)[0].payload)
                 )
             )
             keys = [

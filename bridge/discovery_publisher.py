@@ -1,0 +1,146 @@
+"""Home Assistant discovery as the bridge publishes it: built from the live pollers (units
+and limits read from registers), republished when those change, stale configs emptied.
+
+``DiscoveryPublisher.publish(client)`` sends the bridge device and every device; with
+``only=device_id`` just that device, and only when its payload changed; with
+``clear_stale`` the retained configs this bridge published before but no longer produces
+(a removed device or entity) are emptied first.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+
+from bridge.config import LoadedConfig
+from bridge.core.codec import limits_of, unit_of
+from bridge.core.discovery import (
+    DeviceInfo,
+    Origin,
+    Publish,
+    build_bridge_discovery,
+    build_discovery,
+    removal,
+)
+from bridge.core.entity import PollClass
+from bridge.core.topics import Topics
+from bridge.errors import MissingDataError
+from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DevicePoller
+from bridge.mqtt import MqttClient
+
+log = logging.getLogger(__name__)
+
+
+class DiscoveryPublisher:
+    """The discovery side of one bridge."""
+
+    def __init__(
+        self, loaded: LoadedConfig, engine: Engine, topics: Topics, origin: Origin
+    ) -> None:
+        self.engine = engine
+        self.topics = topics
+        self.origin = origin
+        self._mqtt = loaded.config.mqtt
+        self._health_interval = loaded.config.bridge.health_interval
+        self._sent: dict[str, list[Publish]] = {}
+
+    def forget(self, device_id: str) -> None:
+        """Build the device's discovery afresh next time (its mapping changed)."""
+        self._sent.pop(device_id, None)
+
+    def _device_info(self, poller: DevicePoller) -> DeviceInfo:
+        device = poller.device
+        return DeviceInfo(
+            id=device.id,
+            name=device.display_name,
+            mapping=poller.mapping,
+            options=dict(device.options),
+            bus=device.bus,
+            unit=device.unit,
+            allow_dangerous_writes=device.allow_dangerous_writes,
+            fast_interval=poller.intervals[PollClass.FAST],
+            slow_interval=poller.intervals[PollClass.SLOW],
+        )
+
+    @staticmethod
+    def sources(poller: DevicePoller) -> set[str]:
+        """Keys whose value changes a discovery payload (units and limits from registers)."""
+        sources: set[str] = set()
+        for point in poller.points.values():
+            for source in (point.unit_source, point.min_source, point.max_source):
+                if source is not None:
+                    sources.add(source.key)
+        return sources
+
+    def discovery_for(self, poller: DevicePoller) -> list[Publish]:
+        units, limits = {}, {}
+        for key, point in poller.points.items():
+            if point.unit_source is not None:
+                units[key] = unit_of(point, poller.image)
+            if point.min_source is not None or point.max_source is not None:
+                with contextlib.suppress(MissingDataError):
+                    limits[key] = limits_of(point, poller.image)
+        return build_discovery(
+            self._device_info(poller),
+            self.topics,
+            self.origin,
+            mode=self._mqtt.discovery if self._mqtt.discovery != "off" else "device",
+            units=units,
+            limits=limits,
+            state_refresh=self._mqtt.state_refresh,
+        )
+
+    async def publish(
+        self, client: MqttClient, *, clear_stale: bool = False, only: str | None = None
+    ) -> None:
+        if self._mqtt.discovery == "off":
+            return
+        health = self._health_interval > 0  # the sensors read it
+        bridge_messages = build_bridge_discovery(
+            self.topics,
+            self.origin,
+            self.topics.base,
+            buses=list(self.engine.schedulers) if health else [],
+            devices=list(self.engine.devices) if health else [],
+        )
+        wanted: list[Publish] = [] if only else list(bridge_messages)
+        for device_id, poller in self.engine.devices.items():
+            if only is not None and device_id != only:
+                continue
+            messages = self.discovery_for(poller)
+            if only is not None and messages == self._sent.get(device_id):
+                return  # nothing changed
+            self._sent[device_id] = messages
+            wanted.extend(messages)
+        if clear_stale:
+            await self._clear_stale(client, {m.topic for m in wanted})
+        for message in wanted:
+            await client.publish(message.topic, message.payload, retain=True)
+
+    async def _clear_stale(self, client: MqttClient, current: set[str]) -> None:
+        """Empty the retained configs this bridge published before but no longer produces."""
+        prefix = self.topics.discovery_prefix
+        found: dict[str, bytes] = {}
+        for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
+            found |= await client.retained(pattern)
+        for topic, payload in found.items():
+            if topic not in current and payload and self._ours(payload):
+                log.info("removing stale discovery config %s", topic)
+                message = removal(topic)
+                await client.publish(message.topic, message.payload, retain=True)
+
+    def _ours(self, payload: bytes) -> bool:
+        try:
+            data = json.loads(payload)
+        except ValueError:
+            return False
+        if not isinstance(data, dict):
+            return False
+        device = data.get("device") or data.get("dev") or {}
+        identifiers = device.get("identifiers") or device.get("ids") or []
+        if isinstance(identifiers, str):
+            identifiers = [identifiers]
+        mark = f"{self.topics.base}_"
+        return any(isinstance(i, str) and i.startswith(mark) for i in identifiers)
