@@ -300,6 +300,8 @@ def _number(point: Point, value: object, image: Image) -> float:
         number = float(value)
     except ValueError:
         raise ValueRejectedError(f"{point.key}: {value!r} is not a number") from None
+    except OverflowError:  # an integer beyond any float (JSON allows 1000 digits)
+        raise ValueRejectedError(f"{point.key}: {value!r} does not fit the register") from None
     if not math.isfinite(number):
         raise ValueRejectedError(f"{point.key}: {value!r} is not a finite number")
     low, high = limits_of(point, image)

@@ -38,8 +38,8 @@ def parse_set(payload: bytes, key: str | None) -> dict[str, object]:
     if key is not None:
         return {key: _plain(text)}
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError:
+        data = _json(text)
+    except ValueError:
         raise ValueRejectedError("a device /set payload is a JSON object {key: value}") from None
     if not isinstance(data, dict) or not data:
         raise ValueRejectedError("a device /set payload is a non-empty JSON object {key: value}")
@@ -52,8 +52,8 @@ def parse_get(payload: bytes) -> list[str] | None:
     if not text:
         return None
     try:
-        data = json.loads(text)
-    except json.JSONDecodeError:
+        data = _json(text)
+    except ValueError:
         raise ValueRejectedError('a /get payload is empty, {"key": ""} or ["key", ...]') from None
     keys = list(data) if isinstance(data, dict | list) else None
     if not keys or not all(isinstance(k, str) for k in keys):
@@ -70,14 +70,23 @@ def _text(payload: bytes) -> str:
         raise ValueRejectedError("payload is not UTF-8 text") from None
 
 
+def _json(text: str) -> object:
+    """``json.loads``, with nesting deeper than the parser can follow (``[[[[...``, which
+    raises RecursionError) refused like any other malformed JSON: ValueError."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("JSON nested too deeply") from None
+
+
 def _plain(text: str) -> object:
     """A plain value: JSON scalars as such (``45``, ``4.5``, ``true``, ``"x"``), else text."""
     stripped = text.strip()
     if not stripped:
         raise ValueRejectedError("empty payload")
     try:
-        value = json.loads(stripped)
-    except json.JSONDecodeError:
+        value = _json(stripped)
+    except ValueError:
         return stripped
     if isinstance(value, dict | list):
         raise ValueRejectedError("a /<key>/set payload is one plain value, not an object")
