@@ -26,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import importlib
 import json
+import re
 import sys
 import tempfile
 from collections import Counter
@@ -45,6 +46,7 @@ from homeassistant.const import __version__ as ha_version  # type: ignore[import
 from homeassistant.core import HomeAssistant  # type: ignore[import-not-found]
 from homeassistant.helpers.template import Template  # type: ignore[import-not-found]
 
+_NESTED = re.compile(r"value_json\.(\w+)\['([^']+)'\]\.(\w+)")
 GOLDEN = Path(__file__).resolve().parent.parent / "tests" / "golden" / "discovery"
 PREFIX = "homeassistant"
 READ_ONLY = ("sensor", "binary_sensor")
@@ -151,9 +153,8 @@ class Checker:
         if "value_template" not in config:
             return
         text = config["value_template"].template
-        key = text.split("value_json.")[1].split()[0].rstrip("|")
         for sample in _samples(platform, config):
-            document = {key: sample, "alarms": ["fault_a", "fault_b"]}
+            document = _document(text, sample)
             rendered = Template(text, self.hass).async_render_with_possible_json_value(
                 json.dumps(document), ""
             )
@@ -169,8 +170,21 @@ class Checker:
             self.problem("all", f"via_device {via!r} names no device of the snapshots")
 
 
+def _document(template: str, sample: Any) -> dict[str, Any]:
+    """A state document holding ``sample`` where ``template`` reads: a device's flat JSON
+    (``value_json.key``), or the bridge/health report (``value_json.buses['id'].field``)."""
+    nested = _NESTED.search(template)
+    if nested is not None:
+        section, name, field = nested.groups()
+        return {section: {name: {field: sample}}}
+    key = template.split("value_json.")[1].split(maxsplit=1)[0].rstrip("|")
+    return {key: sample, "alarms": ["fault_a", "fault_b"]}
+
+
 def _samples(platform: str, config: dict[str, Any]) -> list[Any]:
     """Values the state document may hold for a component (null = unknown)."""
+    if "* 100" in config["value_template"].template:
+        return [0.25, 1.0]  # a fraction the report always holds (bus utilisation)
     if platform in ("binary_sensor", "switch"):
         return [True, False, None]
     if config.get("options"):
@@ -201,6 +215,8 @@ def _refusal(platform: str, config: dict[str, Any], rendered: str, sample: Any) 
         return None if rendered in config["options"] else "not one of the options"
     if platform == "number":
         return None if config["min"] <= float(rendered) <= config["max"] else "out of range"
+    if "* 100" in config["value_template"].template:  # a fraction shown in percent
+        return None if float(rendered) == round(sample * 100, 1) else "not the percentage"
     return None if rendered == str(sample) else "changed on the way"
 
 
