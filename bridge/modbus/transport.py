@@ -5,7 +5,10 @@ pymodbus outcome to the bridge's errors: no answer -> DeviceTimeoutError, an exc
 reply -> DeviceExceptionError (standard meaning; the scheduler applies the device's own),
 port or socket down -> BusError. pymodbus' own retries are off (the scheduler decides),
 and so is its habit of dropping a TCP connection after a few unanswered requests: behind
-a gateway one dead unit must not cut off the others.
+a gateway one dead unit must not cut off the others. pymodbus drops an RTU reply whose
+CRC is wrong without a word and lets the request time out; the transport counts those
+drops, so such a transaction ends in FrameError (a frame error on the bus, not a silent
+unit).
 """
 
 from __future__ import annotations
@@ -14,8 +17,8 @@ import logging
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
-from pymodbus.framer import FramerType
-from pymodbus.pdu import ExceptionResponse
+from pymodbus.framer import FramerRTU, FramerType
+from pymodbus.pdu import DecodePDU, ExceptionResponse
 
 from bridge.config import SerialBus, TcpBus
 from bridge.core.health import exception_meaning
@@ -27,6 +30,18 @@ from bridge.modbus.frame import CLIENT_RESPONSES, request_pdu, response_values
 _NEVER_DISCONNECT = 1 << 30
 STANDARD = Protocol()  # no device-specific exception meanings
 Client = AsyncModbusSerialClient | AsyncModbusTcpClient
+
+
+class _CheckedRTU(FramerRTU):
+    """pymodbus' RTU framer, counting the frames it drops for a wrong CRC."""
+
+    crc_errors = 0
+
+    def decode(self, data: bytes) -> tuple[int, int, int, bytes]:
+        used, dev_id, tid, frame = super().decode(data)
+        if used and not frame:  # framer/rtu.py consumes data without a frame only then
+            self.crc_errors += 1
+        return used, dev_id, tid, frame
 
 
 class Transport:
@@ -45,6 +60,8 @@ class Transport:
         logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # the bridge logs outcomes
         if self._client is None:
             self._client = _client_for(self.bus)
+            if isinstance(self._client.ctx.framer, FramerRTU):
+                self._client.ctx.framer = _CheckedRTU(DecodePDU(False))
             for custom in CLIENT_RESPONSES:
                 self._client.register(custom)
             self._client.set_max_no_responses(_NEVER_DISCONNECT)
@@ -67,11 +84,15 @@ class Transport:
             raise BusError(f"{self.bus.id}: not connected to {_where(self.bus)}")
         client.ctx.comm_params.timeout_connect = timeout
         pdu = request_pdu(request, unit)
+        framer = client.ctx.framer
+        crc_errors = framer.crc_errors if isinstance(framer, _CheckedRTU) else 0
         try:
             response = await client.execute(False, pdu)
         except ConnectionException as exc:
             raise BusError(f"{self.bus.id}: connection lost: {exc}") from None
         except ModbusIOException:
+            if isinstance(framer, _CheckedRTU) and framer.crc_errors > crc_errors:
+                raise FrameError(f"unit {unit}: the reply had a wrong CRC") from None
             raise DeviceTimeoutError(f"unit {unit} did not answer within {timeout:g} s") from None
         except ModbusException as exc:
             raise FrameError(f"unit {unit}: {exc}") from None
