@@ -56,7 +56,8 @@ class Engine:
         for bus in config.buses:
             timing = link_timing(bus)
             gap = timing.silence if isinstance(bus, SerialBus) else 0.0
-            self.schedulers[bus.id] = BusScheduler(Transport(bus), gap)
+            late_replies = bus.transport != "tcp"  # only Modbus TCP names the request
+            self.schedulers[bus.id] = BusScheduler(Transport(bus), gap, late_replies=late_replies)
         self._buses = {bus.id: bus for bus in config.buses}
         self._on_update = on_update
         self._policy = policy

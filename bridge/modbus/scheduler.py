@@ -6,6 +6,11 @@ requests): a command waits at most for the one transaction in flight, and a unit
 must rest does not hold up the others. Between two frames the bus stays silent for at
 least 3.5 characters at its baud rate. A lost port or gateway is reopened with backoff
 while jobs wait; every job still ends in its own deadline's error, never hangs.
+
+On links whose replies do not name their request (RTU, ASCII, RTU over TCP: no
+transaction id), a unit that timed out is not addressed again for one more timeout: its
+late reply would otherwise be taken for the answer to the next request to it (another
+block's registers under this block's keys). Other units are served meanwhile.
 """
 
 from __future__ import annotations
@@ -70,15 +75,17 @@ class BusCounters:
 class BusScheduler:
     """Serialises all traffic of one bus."""
 
-    def __init__(self, transport: Transport, gap: float) -> None:
+    def __init__(self, transport: Transport, gap: float, *, late_replies: bool = False) -> None:
         self.transport = transport
         self.gap = gap
+        self.late_replies = late_replies  # True: replies carry no transaction id
         self.counters = BusCounters()
         self._queue: list[_Job] = []
         self._sequence = itertools.count()
         self._wakeup = asyncio.Event()
         self._last_end = 0.0
         self._unit_last: dict[int, float] = {}
+        self._unit_quiet: dict[int, float] = {}  # after a timeout: a late reply may come
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
 
@@ -160,7 +167,8 @@ class BusScheduler:
     def _unit_ready(self, job: _Job, start: float) -> float:
         last = self._unit_last.get(job.unit)
         interval = job.protocol.min_request_interval
-        return start if last is None else max(start, last + interval)
+        ready = start if last is None else max(start, last + interval)
+        return max(ready, self._unit_quiet.get(job.unit, 0.0))
 
     async def _serve(self, job: _Job) -> None:
         """Run one job; a timeout or a transmission error sends it back to the queue while
@@ -197,6 +205,8 @@ class BusScheduler:
             return await self.transport.execute(job.unit, job.request, job.timeout)
         except DeviceTimeoutError:
             self.counters.timeouts += 1
+            if self.late_replies:
+                self._unit_quiet[job.unit] = time.monotonic() + job.timeout
             raise
         except FrameError:
             self.counters.frame_errors += 1
