@@ -8,11 +8,14 @@ and so is its habit of dropping a TCP connection after a few unanswered requests
 a gateway one dead unit must not cut off the others. pymodbus drops an RTU reply whose
 CRC is wrong without a word and lets the request time out; the transport counts those
 drops, so such a transaction ends in FrameError (a frame error on the bus, not a silent
-unit).
+unit). pymodbus waits with Python 3.11's ``asyncio.wait_for``, which loses a cancellation
+that arrives together with the answer; the transport raises it again, or a stopping
+bridge would keep its bus task (and its TaskGroup) running.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
@@ -69,6 +72,7 @@ class Transport:
             connected = await self._client.connect()
         except (OSError, ModbusException) as exc:
             raise BusError(f"{self.bus.id}: cannot open {_where(self.bus)}: {exc}") from None
+        _restore_lost_cancel()
         if not connected:
             raise BusError(f"{self.bus.id}: cannot open {_where(self.bus)}")
 
@@ -88,6 +92,7 @@ class Transport:
         crc_errors = framer.crc_errors if isinstance(framer, _CheckedRTU) else 0
         try:
             response = await client.execute(False, pdu)
+            _restore_lost_cancel()
         except ConnectionException as exc:
             raise BusError(f"{self.bus.id}: connection lost: {exc}") from None
         except ModbusIOException:
@@ -103,6 +108,14 @@ class Transport:
         if isinstance(request, Write):
             return ()
         return response_values(response, request)
+
+
+def _restore_lost_cancel() -> None:
+    """Raise the cancellation that 3.11's ``asyncio.wait_for`` (inside pymodbus) swallowed
+    when the answer and the cancel arrived together."""
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError
 
 
 def _client_for(bus: SerialBus | TcpBus) -> Client:
