@@ -8,9 +8,9 @@ least 3.5 characters at its baud rate. A lost port or gateway is reopened with b
 while jobs wait; every job still ends in its own deadline's error, never hangs.
 
 On links whose replies do not name their request (RTU, ASCII, RTU over TCP: no
-transaction id), a unit that timed out is not addressed again for one more timeout: its
-late reply would otherwise be taken for the answer to the next request to it (another
-block's registers under this block's keys). Other units are served meanwhile.
+transaction id), the bus stays silent for one more timeout after a timeout: the unit may
+still answer, and its late reply would be taken for the answer to its next request
+(another block's registers under this block's keys) or collide with another unit's.
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ class BusScheduler:
         self._wakeup = asyncio.Event()
         self._last_end = 0.0
         self._unit_last: dict[int, float] = {}
-        self._unit_quiet: dict[int, float] = {}  # after a timeout: a late reply may come
+        self._quiet_until = 0.0  # after a timeout: a late reply may still come
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
 
@@ -147,7 +147,7 @@ class BusScheduler:
         while True:
             self._queue = sorted(j for j in self._queue if not j.future.done())
             now = time.monotonic()
-            start = max(now, self._last_end + self.gap)
+            start = max(now, self._last_end + self.gap, self._quiet_until)
             ready_at = [(self._unit_ready(job, start), job) for job in self._queue]
             ready = [job for when, job in ready_at if when <= start]
             if ready and start > now:
@@ -167,8 +167,7 @@ class BusScheduler:
     def _unit_ready(self, job: _Job, start: float) -> float:
         last = self._unit_last.get(job.unit)
         interval = job.protocol.min_request_interval
-        ready = start if last is None else max(start, last + interval)
-        return max(ready, self._unit_quiet.get(job.unit, 0.0))
+        return start if last is None else max(start, last + interval)
 
     async def _serve(self, job: _Job) -> None:
         """Run one job; a timeout or a transmission error sends it back to the queue while
@@ -206,7 +205,7 @@ class BusScheduler:
         except DeviceTimeoutError:
             self.counters.timeouts += 1
             if self.late_replies:
-                self._unit_quiet[job.unit] = time.monotonic() + job.timeout
+                self._quiet_until = time.monotonic() + job.timeout
             raise
         except FrameError:
             self.counters.frame_errors += 1
