@@ -76,6 +76,17 @@ async def test_online_while_connected_offline_after_a_clean_exit(mosquitto: Brok
         assert await other.retained(STATE, settle=0.2) == {STATE: b"offline"}
 
 
+def nodelay(client: MqttClient) -> int:
+    sock = client._connection._client.socket()  # type: ignore[union-attr]
+    return sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)  # type: ignore[union-attr]
+
+
+@pytest.mark.asyncio
+async def test_messages_leave_at_once_without_nagle(mosquitto: Broker) -> None:
+    async with MqttClient(cfg(mosquitto.url), will_topic=STATE) as client:
+        assert nodelay(client)
+
+
 @pytest.mark.asyncio
 async def test_last_will_when_the_connection_dies(mosquitto: Broker) -> None:
     async with (
@@ -170,6 +181,7 @@ async def test_tls_client_certificate(mosquitto_mtls: Broker, tls_files: TlsFile
     tls = TlsConfig(ca=tls_files.ca, cert=tls_files.client_cert, key=tls_files.client_key)
     async with MqttClient(cfg(mosquitto_mtls.url, tls=tls), will_topic=STATE) as client:
         assert await client.retained(STATE, settle=0.1) == {STATE: b"online"}
+        assert nodelay(client)
 
 
 # -- the reconnect loop -----------------------------------------------------------------
