@@ -108,7 +108,8 @@ def decode(point: Point, image: Image) -> Value:
     if unsigned in entity.sentinels:
         return None
     if kind is DataType.F32:
-        return _shortest_f32(unsigned)
+        number = _shortest_f32(unsigned)
+        return None if number is None else _scaled_float(entity, number)
     raw = _integer(entity, unsigned)
     if entity.kind == "number" and point.sign is not None and decode(point.sign, image):
         raw = -raw
@@ -126,6 +127,21 @@ def _shortest_f32(bits: int) -> float | None:
         if struct.pack(">f", candidate) == packed:
             return candidate
     return number
+
+
+def _scaled_float(entity: Entity, number: float) -> float:
+    """A float register's value * scale + offset (the mapping's unit, e.g. Wh -> kWh)."""
+    if entity.scale == 1 and entity.offset == 0:
+        return number
+    exact = Decimal(repr(number)) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
+    return float(f"{float(exact):.9g}")
+
+
+def _unscaled_float(entity: Entity, number: float) -> float:
+    """The float a register holds for an engineering value: (value - offset) / scale."""
+    if entity.scale == 1 and entity.offset == 0:
+        return number
+    return (number - entity.offset) / entity.scale
 
 
 def _integer(entity: Entity, unsigned: int) -> int:
@@ -210,8 +226,11 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
     if kind is DataType.ASCII:
         return (_register_write(point, _encode_text(entity, value)),)
     if kind is DataType.F32:
-        number = _number(point, value, image)
-        packed = struct.unpack(">HH", struct.pack(">f", number))
+        number = _unscaled_float(entity, _number(point, value, image))
+        try:
+            packed = struct.unpack(">HH", struct.pack(">f", number))
+        except OverflowError:
+            raise ValueRejectedError(f"{point.key}: {value!r} does not fit a float32") from None
         return (_register_write(point, _ordered(entity, join_words(packed, Order.BIG))),)
     raw = _raw_for(point, value, image)
     if kind is DataType.BOOL and point.table.is_bits:

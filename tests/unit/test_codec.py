@@ -34,6 +34,8 @@ DECODE_CASES = [
     ("f32 big", {"type": "f32"}, [0x4048, 0xF5C3], 3.14),
     ("f32 little", {"type": "f32", "word_order": "little"}, [0xF5C3, 0x4048], 3.14),
     ("f32 nan", {"type": "f32"}, [0x7FC0, 0x0000], None),
+    ("f32 scaled", {"type": "f32", "scale": 0.001}, [0x4643, 0x5000], 12.5),  # Wh -> kWh
+    ("f32 offset", {"type": "f32", "offset": -273.15}, [0x4392, 0x9333], 20.0),  # K -> °C
     ("ascii", {"type": "ascii", "count": 3}, [0x4142, 0x4344, 0x4500], "ABCDE"),
     ("ascii swap", {"type": "ascii", "count": 2, "byte_order": "little"}, [0x4241, 0x4443], "ABCD"),
     ("ascii blank", {"type": "ascii", "count": 2}, [0x0000, 0x0000], ""),
@@ -111,6 +113,7 @@ ENCODE_CASES = [
     ("s32", {"type": "s32"}, -2, [Write(16, H, 0, (0xFFFF, 0xFFFE))]),
     ("radix", {"type": "u32", "word_radix": 10000}, 120345, [Write(16, H, 0, (12, 345))]),
     ("f32", {"type": "f32"}, 1.5, [Write(16, H, 0, (0x3FC0, 0))]),
+    ("f32 scaled", {"type": "f32", "scale": 0.001}, 12.5, [Write(16, H, 0, (0x4643, 0x5000))]),
     ("ascii", {"type": "ascii", "count": 2}, "AB", [Write(16, H, 0, (0x4142, 0))]),
     ("enum label", {"enum": {0: "off", 1: "on"}}, "on", [Write(6, H, 0, (1,))]),
     ("enum any case", {"enum": {3: "Fix speed"}}, "fix SPEED", [Write(6, H, 0, (3,))]),
