@@ -384,9 +384,22 @@ class DevicePoller:
             if entity.eeprom:
                 self.writes.last_write[write.address] = time.monotonic()
         self.writes.done += 1
+        if entity.readable and entity.press is None:
+            self._publish_acknowledged(point, writes)
         if entity.verify and entity.readable:
             return await self._read_back(point)
         return _as_value(value) if entity.press is None else None
+
+    def _publish_acknowledged(self, point: Point, writes: tuple[Write, ...]) -> None:
+        """Publish what the device acknowledged at once (FC06/FC16 answer only after the
+        unit took the registers), before the read-back that confirms or corrects it: the
+        value is on MQTT one transaction earlier. Only where the written registers are the
+        ones read (not coils, not a separate command register)."""
+        if point.write_address != point.address or any(w.function in (5, 15) for w in writes):
+            return
+        written = {(w.table, w.address + i) for w in writes for i in range(len(w.values))}
+        if {(point.table, a) for a in point.span} <= written:
+            self._publish([point.key], written)
 
     def _check_allowed(self, point: Point) -> None:
         entity = point.entity

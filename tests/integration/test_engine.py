@@ -11,6 +11,7 @@ from bridge.core.mapping import builtin_mapping_names
 from bridge.core.request import Write
 from bridge.errors import DeviceTimeoutError, ValueRejectedError
 from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DeviceUpdate
 from bridge.modbus.simulator import Quirks
 from tests.integration.harness import (
     FAST_POLICY,
@@ -126,6 +127,31 @@ async def test_a_write_reaches_the_wire_and_is_read_back() -> None:
             assert value == 41
             assert sim.value(1, "operating_frequency") == 41
             assert sim.writes[-1] == (1, Write(6, H, 0x37, (41,)))
+
+
+@pytest.mark.asyncio
+async def test_the_acknowledged_value_is_published_before_the_read_back() -> None:
+    """FC06 answers once the unit took the register: the value goes out then, one
+    transaction before the read-back that confirms it."""
+    sim = simulator((1, "soft_starter"))
+    seen: list[tuple[int, object]] = []
+    async with serving_tcp(sim) as port:
+        engine: Engine | None = None
+
+        def record(update: DeviceUpdate) -> None:
+            if "motor_run" in update.changed and engine is not None:
+                transactions = engine.schedulers["tcp"].counters.transactions
+                seen.append((transactions, update.values["motor_run"]))
+
+        engine = Engine(config([tcp_bus(port)], [device("soft_starter")]), record)
+        async with running(engine, pollers=False):
+            starter = engine.devices["soft_starter_1"]
+            await starter.poll(ALL)
+            new = not starter.values["motor_run"]
+            seen.clear()
+            assert await engine.write("soft_starter_1", "motor_run", new) is new
+            total = engine.schedulers["tcp"].counters.transactions
+    assert seen == [(total - 1, new)]  # published after the write, not again after read-back
 
 
 @pytest.mark.asyncio
