@@ -20,14 +20,17 @@ fast poll period achieved: per device, the configured 1 s scaled by the requests
 should make over the requests it made in ``<base>/bridge/health`` (every 10 s).
 
     .venv/bin/python bench/scale.py [seconds] [warm-up seconds]
+    .venv/bin/python bench/scale.py profile [seconds]   # where the CPU goes (50 devices)
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import json
 import os
+import pstats
 import statistics
 import subprocess
 import sys
@@ -63,6 +66,7 @@ CASES = (  # label, units per port, ports, settings period (slow class)
     ("50 devices, own ports, settings 60 s", 1, 50, 60.0),
     ("247 devices, one gateway, settings 60 s", 247, 1, 60.0),
 )
+PROFILED = CASES[5]
 BRIDGE = Path(sys.executable).with_name("modbus-mqtt-bridge")
 TICK = os.sysconf("SC_CLK_TCK")
 
@@ -212,17 +216,24 @@ async def measure_bridge(
 
 
 @contextlib.asynccontextmanager
-async def bridge_process(
-    folder: Path, url: str, units: int, ports: int, poll: dict[str, float]
+async def bridge_process(  # noqa: PLR0917 - the bench's own helper
+    folder: Path,
+    url: str,
+    units: int,
+    ports: int,
+    poll: dict[str, float],
+    profile: Path | None = None,
 ) -> AsyncIterator[tuple[int, int]]:
     """The simulator (``units`` per port) and the bridge, each in its own process; yields
-    their process ids once the bridge is started."""
+    their process ids once the bridge is started (under cProfile, writing ``profile``)."""
     chosen = [free_port() for _ in range(ports)]
     serve = [sys.executable, __file__, "serve", str(units), *map(str, chosen)]
     with process(serve, folder / "simulator.log") as sim:
         await listening(chosen)
         config = bridge_config(folder, url, chosen, units, poll)
         run = [str(BRIDGE), "run", "-c", str(config), "--log-level", "warning"]
+        if profile is not None:
+            run = [sys.executable, "-m", "cProfile", "-o", str(profile), *run]
         with process(run, folder / "bridge.log") as bridge:
             yield bridge.pid, sim.pid
 
@@ -253,6 +264,54 @@ async def run_case(units: int, ports: int, slow: float, warmup: float, seconds: 
                 return await measure_bridge(pids, broker.url, slow, warmup, seconds)
         finally:
             broker.stop()
+
+
+async def profile(seconds: float) -> None:
+    """Run the bridge of ``PROFILED`` under cProfile; print where its CPU time goes."""
+    label, units, ports, slow = PROFILED
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        broker = Broker(folder)
+        broker.start()
+        try:
+            poll = {"fast": PERIOD, "slow": slow}
+            async with bridge_process(folder, broker.url, units, ports, poll, folder / "p"):
+                await asyncio.sleep(seconds)
+        finally:
+            broker.stop()
+        stats = pstats.Stats(str(folder / "p")).stats  # type: ignore[attr-defined]
+    areas: collections.Counter[str] = collections.Counter()
+    modules: collections.Counter[str] = collections.Counter()
+    for (file, _, function), (_, _, own, _, _) in stats.items():
+        if "select.epoll" not in function:  # waiting for I/O: idle
+            areas[_area(file, function)] += own
+        if "/bridge/" in file:
+            modules["bridge/" + file.rsplit("/bridge/", maxsplit=1)[-1]] += own
+    busy = sum(areas.values())
+    print(f"{label}: {seconds:g} s under cProfile (start-up included), {busy:.1f} s busy\n")
+    print("| where | s | % of busy |")
+    print("| --- | ---: | ---: |")
+    for area, own in [*areas.most_common(), *modules.most_common(6)]:
+        print(f"| {area} | {own:.2f} | {100 * own / busy:.1f} |")
+
+
+def _area(file: str, function: str) -> str:
+    if "/bridge/" in file:
+        return "the bridge's own code (modules below)"
+    library = (
+        file.split("site-packages/")[1].split("/", maxsplit=1)[0] if "-packages/" in file else ""
+    )
+    if library in ("paho", "aiomqtt"):
+        return "MQTT client (paho, aiomqtt)"
+    if library == "pymodbus":
+        return "Modbus client (pymodbus)"
+    if library:
+        return "other libraries (pydantic, yaml: mostly start-up)"
+    if "socket" in function and ("send" in function or "recv" in function):
+        return "socket send/recv (system calls)"
+    if "/asyncio/" in file or "selectors" in file:
+        return "event loop (asyncio)"
+    return "standard library and builtins (json, enum, ...)"
 
 
 # --- the simulator process ----------------------------------------------------------------
@@ -297,6 +356,8 @@ async def main(seconds: float, warmup: float) -> None:
 if __name__ == "__main__":
     if sys.argv[1:2] == ["serve"]:
         asyncio.run(serve(int(sys.argv[2]), [int(p) for p in sys.argv[3:]]))
+    elif sys.argv[1:2] == ["profile"]:
+        asyncio.run(profile(float(sys.argv[2]) if len(sys.argv) > 2 else 60.0))
     else:
         numbers = [float(a) for a in sys.argv[1:3]]
         asyncio.run(main(*(numbers + [60.0, 20.0][len(numbers) :])))
