@@ -195,12 +195,14 @@ class MqttClient:
         return self._connection
 
     async def publish(
-        self, topic: str, payload: str | bytes, *, retain: bool = False, qos: int = 1
+        self, topic: str, payload: str | bytes, *, retain: bool = False, qos: int | None = None
     ) -> None:
-        """Publish and, for QoS 1/2, wait for the broker's acknowledgement."""
+        """Publish (at ``mqtt.qos`` unless given) and, for QoS 1/2, wait for the broker's
+        acknowledgement."""
         connection = self._require()
+        level = self._config.qos if qos is None else qos
         try:
-            await connection.publish(topic, payload, qos, retain)
+            await connection.publish(topic, payload, level, retain)
         except aiomqtt.MqttError as exc:
             raise MqttDisconnectedError(f"publish to {topic}: {exc}") from exc
         _restore_lost_cancel()

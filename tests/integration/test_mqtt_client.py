@@ -69,6 +69,18 @@ async def test_publish_subscribe_round_trip(mosquitto: Broker, version: str) -> 
 
 
 @pytest.mark.asyncio
+@pytest.mark.parametrize("qos", [0, 2])
+async def test_publishes_use_the_configured_qos(mosquitto: Broker, qos: int) -> None:
+    """``mqtt.qos`` applies to what the bridge publishes (received at min(pub, sub) QoS)."""
+    async with MqttClient(cfg(mosquitto.url), will_topic=STATE) as client:
+        await client.subscribe("t/q", qos=2)
+        async with MqttClient(cfg(mosquitto.url, qos=qos), will_topic="t/p/state") as other:
+            await other.publish("t/q", "x")
+        message = await next_message(client)
+    assert message.qos == qos
+
+
+@pytest.mark.asyncio
 async def test_online_while_connected_offline_after_a_clean_exit(mosquitto: Broker) -> None:
     async with MqttClient(cfg(mosquitto.url), will_topic=STATE), watcher(mosquitto.url) as other:
         assert await other.retained(STATE, settle=0.2) == {STATE: b"online"}
