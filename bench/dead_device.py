@@ -22,12 +22,29 @@ from bridge.config import load_config_data
 from bridge.core.entity import PollClass
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DevicePoller
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 
 LIVE = (1, 2, 3, 4)
 DEAD = 9
 TIMEOUT = 0.5
 FAST = 0.5
+
+
+def stamp_fast_polls(devices: dict[str, DevicePoller], stamps: dict[str, list[float]]) -> None:
+    """Record in ``stamps`` when each device finished a poll of its fast class."""
+    for device_id, poller in devices.items():
+        original = poller.poll
+        stamps[device_id] = []
+
+        async def timed(
+            classes: object, device_id: str = device_id, original: object = original
+        ) -> None:
+            await original(classes)  # type: ignore[operator]
+            if PollClass.FAST in classes:  # type: ignore[operator]
+                stamps[device_id].append(time.monotonic())
+
+        poller.poll = timed  # type: ignore[method-assign]
 
 
 async def run(seconds: float, with_dead: bool) -> dict[str, float]:
@@ -56,18 +73,8 @@ async def run(seconds: float, with_dead: bool) -> dict[str, float]:
         "retries": 1,
     }
     engine = Engine(load_config_data({"buses": [bus], "devices": devices}, Path("bench.yaml")))
-    stamps: dict[str, list[float]] = {d["id"]: [] for d in devices}  # type: ignore[misc]
-    for device_id, poller in engine.devices.items():
-        original = poller.poll
-
-        async def timed(
-            classes: object, device_id: str = device_id, original: object = original
-        ) -> None:
-            await original(classes)  # type: ignore[operator]
-            if PollClass.FAST in classes:  # type: ignore[operator]
-                stamps[device_id].append(time.monotonic())
-
-        poller.poll = timed  # type: ignore[method-assign]
+    stamps: dict[str, list[float]] = {}
+    stamp_fast_polls(engine.devices, stamps)
     task = asyncio.create_task(engine.run())
     await asyncio.sleep(seconds)
     task.cancel()

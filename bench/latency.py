@@ -46,9 +46,10 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the private broker of the tests
 
+from dead_device import stamp_fast_polls
+
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
-from bridge.core.entity import PollClass
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 from bridge.mqtt import MqttClient
@@ -124,22 +125,6 @@ def config(port: int, broker: Broker, units: tuple[int, ...]) -> Any:
     return load_config_data(data, Path("bench.yaml"))
 
 
-def stamp_fast_polls(bridge: Bridge, stamps: dict[str, list[float]]) -> None:
-    """Record when each device finished a poll of its fast class."""
-    for device_id, poller in bridge.engine.devices.items():
-        original = poller.poll
-        stamps[device_id] = []
-
-        async def timed(
-            classes: object, device_id: str = device_id, original: object = original
-        ) -> None:
-            await original(classes)  # type: ignore[operator]
-            if PollClass.FAST in classes:  # type: ignore[operator]
-                stamps[device_id].append(time.monotonic())
-
-        poller.poll = timed  # type: ignore[method-assign]
-
-
 async def command(
     client: MqttClient, watcher: Watcher, sim: Simulator, unit: int, run: Run
 ) -> None:
@@ -191,7 +176,7 @@ async def measure(commands: int, with_dead: bool, nodelay: bool, seed: int) -> R
     rng = random.Random(seed)  # noqa: S311 - pauses, not secrets
     units = (*LIVE, *([DEAD] if with_dead else []))
     async with running(units, nodelay) as (sim, bridge, url):
-        stamp_fast_polls(bridge, stamps)
+        stamp_fast_polls(bridge.engine.devices, stamps)
         mqtt = MqttConfig(url=url)
         async with MqttClient(mqtt, will_topic="bench/state", client_id="bench") as client:
             watcher = Watcher(client)
