@@ -39,9 +39,8 @@ from bridge.errors import (
     ModbusError,
     ValueRejectedError,
 )
-from bridge.modbus.engine import link_timing
+from bridge.modbus.engine import bus_scheduler
 from bridge.modbus.scheduler import BusScheduler, Priority
-from bridge.modbus.transport import Transport
 
 Submit = Callable[[int, Read | Write, float], Awaitable[tuple[int, ...]]]
 """One transaction: (unit, request, timeout) -> values read (empty for a write); raises
@@ -227,9 +226,9 @@ def scheduler_submit(
 async def open_bus(bus: SerialBus | TcpBus) -> AsyncIterator[Submit]:
     """A bus of our own for the block: port or connection opened now (BusError if it
     cannot be), one scheduler serialising the frames, everything closed on exit."""
-    transport = Transport(bus)
-    gap = link_timing(bus).silence if isinstance(bus, SerialBus) else 0.0
-    scheduler = BusScheduler(transport, gap)
+    # No silent timeout after a timeout: a scan would pay it for every absent unit.
+    scheduler = bus_scheduler(bus, guard_late_replies=False)
+    transport = scheduler.transport
     try:
         await transport.open()
         # Not a TaskGroup: it would wrap the block's own errors in an ExceptionGroup. The

@@ -40,6 +40,14 @@ def link_timing(bus: SerialBus | TcpBus) -> LinkTiming:
     return LinkTiming(mode="tcp")
 
 
+def bus_scheduler(bus: SerialBus | TcpBus, *, guard_late_replies: bool = True) -> BusScheduler:
+    """The scheduler of one bus: its transport, the serial inter-frame silence, and (unless
+    turned off) a silent timeout after a timeout where replies carry no transaction id."""
+    gap = link_timing(bus).silence if isinstance(bus, SerialBus) else 0.0
+    late_replies = guard_late_replies and bus.transport != "tcp"  # only TCP names requests
+    return BusScheduler(Transport(bus), gap, late_replies=late_replies)
+
+
 class Engine:
     """All buses and devices of one config."""
 
@@ -54,10 +62,7 @@ class Engine:
         self.schedulers: dict[str, BusScheduler] = {}
         self.devices: dict[str, DevicePoller] = {}
         for bus in config.buses:
-            timing = link_timing(bus)
-            gap = timing.silence if isinstance(bus, SerialBus) else 0.0
-            late_replies = bus.transport != "tcp"  # only Modbus TCP names the request
-            self.schedulers[bus.id] = BusScheduler(Transport(bus), gap, late_replies=late_replies)
+            self.schedulers[bus.id] = bus_scheduler(bus)
         self._buses = {bus.id: bus for bus in config.buses}
         self._on_update = on_update
         self._policy = policy
