@@ -294,25 +294,40 @@ def _load_mappings(config: Config, base: Path) -> tuple[dict[str, Mapping], list
     errors: list[str] = []
     buses = {bus.id: bus for bus in config.buses}
     for device in config.devices:
-        where = f"devices.{device.id}"
-        try:
-            path = _resolve(device.mapping, base)
-            mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
-        except MappingError as exc:
-            errors.extend(f"{where}.mapping: {exc.source}: {issue}" for issue in exc.issues)
-            continue
-        loaded[device.id] = mapping
-        for name, value in device.options.items():
-            spec = mapping.options.get(name)
-            if spec is None:
-                known = ", ".join(mapping.options) or "none"
-                errors.append(f"{where}.options.{name}: the mapping has no such option ({known})")
-            elif value not in spec.choices:
-                errors.append(f"{where}.options.{name}: {value!r} is not one of {spec.choices}")
-        transport = buses[device.bus].transport
-        if transport == "ascii" and "ascii" not in mapping.protocol.transports:
-            errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
+        mapping, problems = load_device_mapping(device, buses[device.bus], base, cache)
+        errors += problems
+        if mapping is not None:
+            loaded[device.id] = mapping
     return loaded, errors
+
+
+def load_device_mapping(
+    device: DeviceConfig,
+    bus: SerialBus | TcpBus,
+    base: Path,
+    cache: dict[Path, Mapping] | None = None,
+) -> tuple[Mapping | None, list[str]]:
+    """A device's mapping (relative paths from ``base``) and every problem with it for
+    this device, as ``devices.<id>.<field>: message`` rows: the file itself, the device's
+    options, a transport the model does not speak. The mapping is None if it cannot load."""
+    where = f"devices.{device.id}"
+    cache = {} if cache is None else cache
+    try:
+        path = _resolve(device.mapping, base)
+        mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
+    except MappingError as exc:
+        return None, [f"{where}.mapping: {exc.source}: {issue}" for issue in exc.issues]
+    errors = []
+    for name, value in device.options.items():
+        spec = mapping.options.get(name)
+        if spec is None:
+            known = ", ".join(mapping.options) or "none"
+            errors.append(f"{where}.options.{name}: the mapping has no such option ({known})")
+        elif value not in spec.choices:
+            errors.append(f"{where}.options.{name}: {value!r} is not one of {spec.choices}")
+    if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
+        errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
+    return mapping, errors
 
 
 def _secret_errors(mqtt: MqttConfig) -> list[str]:

@@ -15,7 +15,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from bridge import __version__
-from bridge.config import DeviceConfig, LoadedConfig, config_schema
+from bridge.config import DeviceConfig, LoadedConfig, config_schema, load_device_mapping
 from bridge.core.management_request import (
     REQUESTS,
     DeviceRead,
@@ -33,11 +33,9 @@ from bridge.core.management_request import (
 from bridge.core.mapping import (
     Mapping,
     builtin_mapping_names,
-    load_mapping,
     mapping_schema,
-    resolve_mapping_path,
 )
-from bridge.errors import BridgeError, InputError, ModbusError
+from bridge.errors import BridgeError, ModbusError
 from bridge.modbus.commission import (
     explain,
     raw_read,
@@ -202,24 +200,15 @@ class Management:
         return {"reloaded": wanted, "changed": changed}
 
     def _load_mappings(self, settings: dict[str, DeviceConfig]) -> dict[str, Mapping]:
-        """The mapping of each device read again, checked against its options."""
-        base = self.loaded.path.parent
+        """The mapping of each device read again, checked as ``check`` checks a config."""
         loaded: dict[str, Mapping] = {}
         errors: list[str] = []
         for device_id, device in settings.items():
-            try:
-                mapping = load_mapping(resolve_mapping_path(device.mapping, base))
-            except InputError as exc:
-                errors.append(f"{device_id}: {exc.source}: {'; '.join(exc.issues)}")
-                continue
-            transport = self.engine.schedulers[device.bus].transport.bus.transport
-            if transport == "ascii" and "ascii" not in mapping.protocol.transports:
-                errors.append(f"{device_id}: {mapping.model} does not speak Modbus ASCII")
-            for name, value in device.options.items():
-                spec = mapping.options.get(name)
-                if spec is None or value not in spec.choices:
-                    errors.append(f"{device_id}: option {name}={value!r} is not in the mapping")
-            loaded[device_id] = mapping
+            bus = self.engine.schedulers[device.bus].transport.bus
+            mapping, problems = load_device_mapping(device, bus, self.loaded.path.parent)
+            errors += problems
+            if mapping is not None:
+                loaded[device_id] = mapping
         if errors:
             raise RequestError("nothing reloaded: " + "; ".join(errors))
         return loaded

@@ -247,6 +247,7 @@ async def test_mapping_reload_applies_a_changed_file_and_refuses_a_broken_one(
         refused = await request(tester, "mapping/reload", {"devices": ["pump"]})
         assert refused["status"] == "error"
         assert "nothing reloaded" in refused["error"] and "start_stop" in refused["error"]
+        assert "devices.pump.mapping: " in refused["error"]  # the rows `check` prints
         assert bridge.engine.devices["pump"] is poller
 
         lines = original.splitlines(keepends=True)
