@@ -15,10 +15,8 @@ import asyncio
 import contextlib
 import itertools
 import json
-import os
 import random
 import time
-import tty
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
@@ -31,7 +29,7 @@ from bridge.core.health import DeviceHealth
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.errors import BusError
 from bridge.modbus.engine import Engine
-from bridge.modbus.null_modem import null_modem
+from bridge.modbus.null_modem import Send, null_modem
 from bridge.modbus.scheduler import REOPEN_INITIAL, BusScheduler
 from bridge.modbus.simulator import Quirks, Simulator
 from tests.integration.harness import (
@@ -362,44 +360,21 @@ class NoisyCable:
         self.junk += 1
         return bytes(self.rng.randrange(0x80, 0x100) for _ in range(self.rng.randrange(1, 6)))
 
-    @contextlib.contextmanager
-    def open(self) -> Iterator[tuple[str, str]]:
-        """Yield ``(device_end, bridge_end)`` like ``null_modem()``."""
-        loop = asyncio.get_running_loop()
-        (m1, s1), (m2, s2) = os.openpty(), os.openpty()
-        for fd in (s1, s2):
-            tty.setraw(fd)
+    def open(self) -> contextlib.AbstractContextManager[tuple[str, str]]:
+        """``(device_end, bridge_end)``: ``null_modem()`` with this noise on the replies."""
+        return null_modem(self._damage)
 
-        def send(data: bytes) -> None:
-            with contextlib.suppress(OSError):
-                os.write(m2, data)
-
-        def to_bridge() -> None:
-            with contextlib.suppress(OSError):
-                reply = bytearray(os.read(m1, 4096))
-                self.replies += 1
-                if self.corrupt_every and self.replies % self.corrupt_every == 0:
-                    reply[-1] ^= 0x5A  # the CRC's last byte
-                    self.corrupted += 1
-                if self.garbage and self.rng.random() < 0.3:
-                    reply[:0] = self._garbage()  # garbage before the frame
-                send(bytes(reply))
-                if self.garbage and self.rng.random() < 0.3:
-                    loop.call_later(0.002, send, self._garbage())  # between frames
-
-        def to_device() -> None:
-            with contextlib.suppress(OSError):
-                os.write(m1, os.read(m2, 4096))
-
-        loop.add_reader(m1, to_bridge)
-        loop.add_reader(m2, to_device)
-        try:
-            yield os.ttyname(s1), os.ttyname(s2)
-        finally:
-            loop.remove_reader(m1)
-            loop.remove_reader(m2)
-            for fd in (m1, s1, m2, s2):
-                os.close(fd)
+    def _damage(self, data: bytes, send: Send) -> None:
+        reply = bytearray(data)
+        self.replies += 1
+        if self.corrupt_every and self.replies % self.corrupt_every == 0:
+            reply[-1] ^= 0x5A  # the CRC's last byte
+            self.corrupted += 1
+        if self.garbage and self.rng.random() < 0.3:
+            reply[:0] = self._garbage()  # garbage before the frame
+        send(bytes(reply))
+        if self.garbage and self.rng.random() < 0.3:
+            asyncio.get_running_loop().call_later(0.002, send, self._garbage())  # between frames
 
 
 @pytest.mark.asyncio
