@@ -225,7 +225,7 @@ def test_example_loads_plans_and_simulates_for_every_option(path: Path) -> None:
                 value = decode(point, image)
                 assert value is not None or point.entity.enum is not None, key
             if point.entity.press is not None:
-                assert encode(point, None, image), key
+                assert encode(point, "PRESS", image), key
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)

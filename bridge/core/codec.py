@@ -23,8 +23,13 @@ from bridge.errors import MissingDataError, ValueRejectedError
 Image = AnyMapping[tuple[Table, int], int]
 Value = bool | int | float | str | None
 
-_TRUE = {"on", "true", "1", "yes", "press", "open"}
-_FALSE = {"off", "false", "0", "no", "closed"}
+# What a command may say (DESIGN.md, MQTT contract): a switch takes only its on/off words
+# (any case), a button only its press payload; nothing else turns a switch on or presses.
+COMMAND_ON = "ON"
+COMMAND_OFF = "OFF"
+COMMAND_PRESS = "PRESS"
+_TRUE = {"on", "true", "1"}
+_FALSE = {"off", "false", "0"}
 
 
 # --- raw words <-> integers -----------------------------------------------------------
@@ -180,7 +185,7 @@ def unscale_value(entity: Entity, value: float) -> int:
             repr(entity.scale)
         )
     except InvalidOperation:
-        raise ValueRejectedError(f"{value!r} is not a finite number") from None
+        raise ValueRejectedError(f"{_shown(value)} is not a finite number") from None
     return int(exact.to_integral_value(ROUND_HALF_UP))
 
 
@@ -221,7 +226,7 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
     if not entity.writable:
         raise ValueRejectedError(f"{point.key} is read-only")
     if entity.press is not None:
-        value = entity.press
+        value = _press_value(point.key, entity.press, value)
     kind = entity.data_type
     if kind is DataType.ASCII:
         return (_register_write(point, _encode_text(entity, value)),)
@@ -230,7 +235,9 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
         try:
             packed = struct.unpack(">HH", struct.pack(">f", number))
         except OverflowError:
-            raise ValueRejectedError(f"{point.key}: {value!r} does not fit a float32") from None
+            raise ValueRejectedError(
+                f"{point.key}: {_shown(value)} does not fit a float32"
+            ) from None
         return (_register_write(point, _ordered(entity, join_words(packed, Order.BIG))),)
     raw = _raw_for(point, value, image)
     if kind is DataType.BOOL and point.table.is_bits:
@@ -253,7 +260,7 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
     bits = 32 if entity.register_count == 2 else 16
     unsigned = raw & ((1 << bits) - 1)  # two's complement for signed types
     if unsigned in entity.sentinels:
-        raise ValueRejectedError(f"{point.key}: {value!r} is the device's 'unknown' marker")
+        raise ValueRejectedError(f"{point.key}: {_shown(value)} is the device's 'unknown' marker")
     writes.append(_register_write(point, _ordered(entity, unsigned)))
     return tuple(writes)
 
@@ -285,7 +292,7 @@ def _raw_for(point: Point, value: object, image: Image) -> int:
     low, high = raw_bounds(entity)
     magnitude_low = -high if point.sign is not None else low
     if not magnitude_low <= raw <= high:
-        raise ValueRejectedError(f"{point.key}: {value!r} does not fit the register")
+        raise ValueRejectedError(f"{point.key}: {_shown(value)} does not fit the register")
     return raw
 
 
@@ -298,47 +305,65 @@ def _enum_raw(point: Point, value: object) -> int:
     if isinstance(value, int) and not isinstance(value, bool) and value in enum:
         return value
     options = ", ".join(repr(label) for label in enum.values())
-    raise ValueRejectedError(f"{point.key}: {value!r} is not one of {options}")
+    raise ValueRejectedError(f"{point.key}: {_shown(value)} is not one of {options}")
 
 
 def parse_bool(key: str, value: object) -> bool:
-    """ON/OFF, true/false, 1/0 (any case) -> bool."""
+    """ON/OFF, true/false, 1/0 (text in any case, or JSON) -> bool; nothing else."""
     if isinstance(value, bool):
         return value
     if isinstance(value, int) and value in (0, 1):
         return bool(value)
     if isinstance(value, str) and value.strip().casefold() in _TRUE | _FALSE:
         return value.strip().casefold() in _TRUE
-    raise ValueRejectedError(f"{key}: {value!r} is not ON/OFF")
+    raise ValueRejectedError(f"{key}: {_shown(value)} is not ON/OFF (or true/false, 1/0)")
+
+
+def _press_value(key: str, press: bool | int | float | str, value: object) -> object:
+    """``press`` (what the button writes) when the command is the press payload ``PRESS``
+    (any case); any other value (OFF, false, 0, ...) presses nothing."""
+    if isinstance(value, str) and value.strip().casefold() == COMMAND_PRESS.casefold():
+        return press
+    raise ValueRejectedError(
+        f"{key} is a button: only {COMMAND_PRESS} presses it, not {_shown(value)}"
+    )
+
+
+def _shown(value: object, limit: int = 40) -> str:
+    """A value as an error message quotes it: repr, cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _number(point: Point, value: object, image: Image) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | str):
-        raise ValueRejectedError(f"{point.key}: {value!r} is not a number")
+        raise ValueRejectedError(f"{point.key}: {_shown(value)} is not a number")
     try:
         number = float(value)
     except ValueError:
-        raise ValueRejectedError(f"{point.key}: {value!r} is not a number") from None
+        raise ValueRejectedError(f"{point.key}: {_shown(value)} is not a number") from None
     except OverflowError:  # an integer beyond any float (JSON allows 1000 digits)
-        raise ValueRejectedError(f"{point.key}: {value!r} does not fit the register") from None
+        raise ValueRejectedError(
+            f"{point.key}: {_shown(value)} does not fit the register"
+        ) from None
     if not math.isfinite(number):
-        raise ValueRejectedError(f"{point.key}: {value!r} is not a finite number")
+        raise ValueRejectedError(f"{point.key}: {_shown(value)} is not a finite number")
     low, high = limits_of(point, image)
     if (low is not None and number < low) or (high is not None and number > high):
-        raise ValueRejectedError(f"{point.key}: {value!r} is outside {low}..{high}")
+        raise ValueRejectedError(f"{point.key}: {_shown(value)} is outside {low}..{high}")
     return number
 
 
 def _encode_text(entity: Entity, value: object) -> tuple[int, ...]:
     if not isinstance(value, str):
-        raise ValueRejectedError(f"{value!r} is not text")
+        raise ValueRejectedError(f"{_shown(value)} is not text")
     try:
         data = value.encode("ascii")
     except UnicodeEncodeError:
-        raise ValueRejectedError(f"{value!r} is not ASCII text") from None
+        raise ValueRejectedError(f"{_shown(value)} is not ASCII text") from None
     size = entity.register_count * 2
     if len(data) > size:
-        raise ValueRejectedError(f"{value!r} is longer than {size} characters")
+        raise ValueRejectedError(f"{_shown(value)} is longer than {size} characters")
     return _from_bytes(data.ljust(size, b"\x00"), entity.byte_order)
 
 

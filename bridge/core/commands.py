@@ -5,17 +5,25 @@ takes a plain value: a number, ``true``/``false``, ``ON``/``OFF``, an enum label
 or a JSON value. ``<base>/<device>/get`` takes nothing (read everything) or a JSON object
 or list naming the keys. What the value means for the entity (type, range, enum label)
 is checked by the codec when the command is encoded; here only the payload's shape is.
+
+Bounds: a payload longer than ``MAX_PAYLOAD`` bytes is refused before it is decoded or
+parsed, and an error quotes at most ``ECHO`` characters of what it refuses
+(``error_document`` is always valid JSON: no bare NaN, no megabytes echoed back).
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections import OrderedDict
 from dataclasses import dataclass
 
 from bridge.errors import ValueRejectedError
 
-MAX_PAYLOAD = 4096
+MAX_PAYLOAD = 65536  # bytes of a command or management request
+ECHO = 64  # characters of a refused value quoted back
+ERROR_TEXT = 500  # characters of an error message
+MAX_KEYS = 100  # keys of one /set (a device has up to about 200 entities, few writable)
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +51,8 @@ def parse_set(payload: bytes, key: str | None) -> dict[str, object]:
         raise ValueRejectedError("a device /set payload is a JSON object {key: value}") from None
     if not isinstance(data, dict) or not data:
         raise ValueRejectedError("a device /set payload is a non-empty JSON object {key: value}")
+    if len(data) > MAX_KEYS:
+        raise ValueRejectedError(f"{len(data)} keys in one /set: at most {MAX_KEYS}")
     return dict(data)
 
 
@@ -61,9 +71,42 @@ def parse_get(payload: bytes) -> list[str] | None:
     return keys
 
 
-def _text(payload: bytes) -> str:
+def check_size(payload: bytes) -> None:
+    """ValueRejectedError for a payload beyond ``MAX_PAYLOAD`` (before anything parses it)."""
     if len(payload) > MAX_PAYLOAD:
-        raise ValueRejectedError(f"payload longer than {MAX_PAYLOAD} bytes")
+        raise ValueRejectedError(
+            f"payload of {len(payload)} bytes refused: at most {MAX_PAYLOAD} bytes"
+        )
+
+
+def echo(value: object) -> object:
+    """``value`` as an error quotes it: JSON scalars as they are, anything else (long text,
+    bytes, objects, NaN) as text cut to ``ECHO`` characters."""
+    if value is None or isinstance(value, bool | int):
+        return value if not isinstance(value, int) or abs(value) < 10**15 else _cut(str(value))
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, bytes):
+        text = value[:ECHO].decode("utf-8", errors="replace")
+        return text if len(value) <= ECHO else f"{text}... ({len(value)} bytes)"
+    if isinstance(value, str):
+        return _cut(value)
+    return _cut(repr(value))
+
+
+def _cut(text: str, limit: int = ECHO) -> str:
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def error_document(key: str | None, value: object, error: str) -> str:
+    """The JSON of ``<device>/error``: ``{key, value, error}``, bounded and always valid."""
+    shown_key = key if key is None else _cut(key)
+    document = {"key": shown_key, "value": echo(value), "error": _cut(error, ERROR_TEXT)}
+    return json.dumps(document, allow_nan=False)
+
+
+def _text(payload: bytes) -> str:
+    check_size(payload)
     try:
         return payload.decode("utf-8")
     except UnicodeDecodeError:

@@ -21,7 +21,7 @@ from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.core.codec import raw_bounds, scale_value
+from bridge.core.codec import COMMAND_OFF, COMMAND_ON, COMMAND_PRESS, raw_bounds, scale_value
 from bridge.core.entity import Component, DataType, Entity, PollClass
 from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
 from bridge.core.topics import Topics
@@ -33,9 +33,6 @@ Limits = tuple[float | None, float | None]
 # through the template, commands take ON/OFF and PRESS (see DESIGN.md, MQTT contract).
 STATE_TRUE = "True"
 STATE_FALSE = "False"
-COMMAND_ON = "ON"
-COMMAND_OFF = "OFF"
-COMMAND_PRESS = "PRESS"
 QOS = 1
 TEXT_MAX = 255  # Home Assistant's longest state
 ALARMS_TEMPLATE = f"{{{{ (value_json.alarms | join(', ') or 'none')[:{TEXT_MAX}] }}}}"

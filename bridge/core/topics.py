@@ -107,9 +107,9 @@ class Topics:
         return f"{self.discovery_prefix}/{component}/{device_id}/{key}/config"
 
     def command_filters(self) -> tuple[str, ...]:
-        """Subscriptions for every command topic (plus Home Assistant's status)."""
+        """Subscriptions for every command topic (live messages only: see DESIGN.md)."""
         base = self.base
-        return (f"{base}/+/set", f"{base}/+/+/set", f"{base}/+/get", self.ha_status)
+        return (f"{base}/+/set", f"{base}/+/+/set", f"{base}/+/get")
 
     def parse_command(self, topic: str) -> CommandTopic | None:
         """The command a topic carries, or None for any other topic."""

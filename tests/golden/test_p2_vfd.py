@@ -87,18 +87,18 @@ def test_ascii_example_registers_hidden_by_default() -> None:
     ("key", "value", "frame"),
     [
         pytest.param("command", "forward_run", "01 06 20 00 00 01 43 CA", id="D1"),
-        pytest.param("reverse_run", None, "01 06 20 00 00 02 03 CB", id="D2"),
+        pytest.param("reverse_run", "PRESS", "01 06 20 00 00 02 03 CB", id="D2"),
         pytest.param("command", "forward_jog", "01 06 20 00 00 03 C2 0B", id="D3"),
-        pytest.param("reverse_jog", None, "01 06 20 00 00 04 83 C9", id="D4"),
+        pytest.param("reverse_jog", "PRESS", "01 06 20 00 00 04 83 C9", id="D4"),
         pytest.param("command", "coast_stop", "01 06 20 00 00 05 42 09", id="D5"),
         pytest.param("command", "stop", "01 06 20 00 00 06 02 08", id="D6"),
-        pytest.param("stop", None, "01 06 20 00 00 06 02 08", id="D6-button"),
+        pytest.param("stop", "PRESS", "01 06 20 00 00 06 02 08", id="D6-button"),
         pytest.param("command", "fault_reset", "01 06 20 00 00 07 C3 C8", id="D7"),
-        pytest.param("fault_reset", None, "01 06 20 00 00 07 C3 C8", id="D7-button"),
+        pytest.param("fault_reset", "PRESS", "01 06 20 00 00 07 C3 C8", id="D7-button"),
         pytest.param("set_value", 50.0, "01 06 10 00 13 88 80 5C", id="D8"),
         pytest.param("set_value", -50.0, "01 06 10 00 EC 78 C1 E8", id="D9"),
         pytest.param("password_verification", 12345, "01 06 1F 00 30 39 5A 0C", id="D15"),
-        pytest.param("lock_parameters", None, "01 06 1F 01 55 AA 60 F1", id="D17"),
+        pytest.param("lock_parameters", "PRESS", "01 06 1F 01 55 AA 60 F1", id="D17"),
     ],
 )
 def test_write_frames(key: str, value: object, frame: str) -> None:
@@ -241,7 +241,7 @@ def test_every_option_combination_and_button() -> None:
             points = MAPPING.points({"control_mode": mode, "ascii_example_registers": shown})
             for point in points.values():
                 if point.entity.press is not None:
-                    (write,) = encode(point, None, {})
+                    (write,) = encode(point, "PRESS", {})
                     assert write.function == 6
     torque = MAPPING.points({"control_mode": "torque"})
     assert torque["set_value"].entity.name == "Torque set value"

@@ -31,7 +31,7 @@ STANDARD_POINTS = STANDARD_ON.points()
 
 def press_frame(points: dict[str, Point], key: str, unit: int = 1) -> bytes:
     """The FC05 frame the bridge sends when the button ``key`` is pressed."""
-    (write,) = encode(points[key], None, {})
+    (write,) = encode(points[key], "PRESS", {})
     return build_frame(write, unit)
 
 
@@ -87,7 +87,7 @@ def test_fc03_read_battery_and_charger_voltage() -> None:
 
 
 def test_fc05_auto_request_and_echo() -> None:
-    (write,) = encode(POINTS["command_auto"], None, {})
+    (write,) = encode(POINTS["command_auto"], "PRESS", {})
     assert write == Write(5, Table.COIL, 3, (0x00FF,))
     frame = build_frame(write, 1)
     assert frame == hexbytes("01 05 00 03 00 FF 7D 8A")
@@ -279,7 +279,7 @@ def test_every_option_combination_resolves_and_presses(options: dict[str, str]) 
     buttons = [p for p in points.values() if p.entity.press is not None]
     assert len(buttons) == 7
     for point in buttons:
-        (write,) = encode(point, None, {})
+        (write,) = encode(point, "PRESS", {})
         assert write.function == 5
         assert write.values == (0x00FF,)
     assert ("mains_voltage_ua" in points) is (options["model"] == "hgm6120")

@@ -124,9 +124,9 @@ WRITES = [
     ("S2", "soft_start_mode", "ramp", {}, "01 06 10 01 00 01 1D 0A"),
     ("D1", "motor_run", True, {"motor_run": 0}, "01 06 10 30 00 01 4C C5"),
     ("D2", "motor_run", False, {"motor_run": 1}, "01 06 10 30 00 00 8D 05"),
-    ("D3", "fault_reset", None, {}, "01 06 10 2E 00 00 ED 03"),
+    ("D3", "fault_reset", "PRESS", {}, "01 06 10 2E 00 00 ED 03"),
     ("D8", "control_mode", "communication", {}, "01 06 10 19 00 02 DD 0C"),
-    ("D12", "factory_reset", None, {}, "01 06 10 2F 00 00 BC C3"),
+    ("D12", "factory_reset", "PRESS", {}, "01 06 10 2F 00 00 BC C3"),
 ]
 
 
@@ -262,10 +262,10 @@ def test_protection_enabled_views(key: str, raw: int, enabled: bool) -> None:
 def test_run_time_clear_buttons() -> None:
     for key in ("clear_current_run_time", "clear_cumulative_run_time"):
         point = POINTS[key]
-        (write,) = encode(point, None, {})
+        (write,) = encode(point, "PRESS", {})
         assert write == Write(16, Table.HOLDING, point.address, (0, 0))
         assert len(write.values) <= MAPPING.protocol.max_write_registers
-    (write,) = encode(POINTS["clear_current_run_time"], None, {})
+    (write,) = encode(POINTS["clear_current_run_time"], "PRESS", {})
     assert build_frame(write, 1) == hexbytes("01 10 10 2A 00 02 04 00 00 00 00 BC 08")
 
 
@@ -308,7 +308,7 @@ def test_option_combinations_load_and_buttons_encode(options: dict[str, str]) ->
     points = MAPPING.points(options)
     for point in points.values():
         if point.entity.press is not None:
-            assert encode(point, None, {})
+            assert encode(point, "PRESS", {})
         if point.entity.readable:
             read = Read(point.table, point.address, point.count)
             assert read.count <= MAPPING.protocol.max_read_registers

@@ -163,7 +163,7 @@ SINGLE_WRITES = [
     pytest.param("reverse", True, 0x0001, ["01 06 07 D0 00 03 C9 46"], id="computed-run-reverse"),
     pytest.param(
         "fault_reset",
-        None,
+        "PRESS",
         0x0000,
         ["01 06 07 D0 00 04 88 84", "01 06 07 D0 00 00 89 47"],
         id="computed-fault-reset-edge",
@@ -181,7 +181,7 @@ def test_single_register_write(key: str, value: object, word: int, frames: list[
 
 
 def test_fault_reset_pulse_keeps_run_and_direction() -> None:
-    writes = encode(POINTS["fault_reset"], None, control_word(0x0003))
+    writes = encode(POINTS["fault_reset"], "PRESS", control_word(0x0003))
     assert [w.values for w in writes] == [(0x0007,), (0x0003,)]
 
 
@@ -266,4 +266,4 @@ def test_every_button_press_encodes() -> None:
     buttons = [p for p in POINTS.values() if p.entity.press is not None]
     assert buttons
     for point in buttons:
-        assert encode(point, None, control_word(0))
+        assert encode(point, "PRESS", control_word(0))

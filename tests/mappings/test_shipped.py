@@ -83,7 +83,7 @@ def test_buttons_encode_with_the_registers_they_need(name: str) -> None:
                 continue
             if point.entity.field_width is not None:
                 image |= {(point.table, point.address): 0}
-            writes = encode(point, None, image)
+            writes = encode(point, "PRESS", image)
             assert writes, key
             for write in writes:
                 assert all(0 <= v <= 0xFFFF for v in write.values), key

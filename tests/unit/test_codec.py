@@ -150,7 +150,7 @@ def test_encode_bit_needs_current_word() -> None:
 
 def test_pulse_sets_then_clears_the_bit() -> None:
     point = make_point(access="w", bit=2, pulse=True, press=True)
-    assert encode(point, None, image_of(0x0001)) == (
+    assert encode(point, "PRESS", image_of(0x0001)) == (
         Write(6, H, 0, (0x0005,)),
         Write(6, H, 0, (0x0001,)),
     )
@@ -158,7 +158,7 @@ def test_pulse_sets_then_clears_the_bit() -> None:
 
 def test_pulse_makes_a_rising_edge_when_the_bit_was_left_set() -> None:
     point = make_point(access="w", bit=2, pulse=True, press=True)
-    assert encode(point, None, image_of(0x0005)) == (
+    assert encode(point, "PRESS", image_of(0x0005)) == (
         Write(6, H, 0, (0x0001,)),
         Write(6, H, 0, (0x0005,)),
         Write(6, H, 0, (0x0001,)),
@@ -198,7 +198,7 @@ def test_coil_button_and_fc15() -> None:
 
 def test_button_writes_its_press_value() -> None:
     point = make_point(access="w", press=0x55AA)
-    assert encode(point, None, {}) == (Write(6, H, 0, (0x55AA,)),)
+    assert encode(point, "PRESS", {}) == (Write(6, H, 0, (0x55AA,)),)
 
 
 REJECTED = [

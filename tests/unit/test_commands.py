@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from bridge.core.commands import Command, RecentMessages, parse_get, parse_set
@@ -45,7 +47,6 @@ def test_topic_names() -> None:
         "modbus/+/set",
         "modbus/+/+/set",
         "modbus/+/get",
-        "homeassistant/status",
     )
 
 
@@ -76,7 +77,8 @@ def test_parse_set(payload: bytes, key: str | None, parsed: dict[str, object]) -
         (b"", "x", "empty payload"),
         (b'{"a": 1}', "x", "one plain value"),
         (b"\xff\xfe", "x", "not UTF-8"),
-        (b"1" * 5000, "x", "longer than"),
+        (b"1" * 70000, "x", "at most 65536 bytes"),
+        (json.dumps({f"k{i}": 1 for i in range(101)}).encode(), None, "at most 100"),
     ],
 )
 def test_parse_set_refuses(payload: bytes, key: str | None, message: str) -> None:
