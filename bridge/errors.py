@@ -7,7 +7,9 @@
     ├── CodecError              a value cannot be decoded or encoded
     │   ├── MissingDataError    a register the value needs has not been read yet
     │   └── ValueRejectedError  a command value is refused (not writable, type, range,
-    │                           enum label, sentinel, guard); nothing is written
+    │       │                   enum label, sentinel, guard); nothing is written
+    │       └── CommandRejectedError  keys of a multi-key command were refused; ``refused``
+    │                           maps each to its reason; nothing of the command is written
     ├── CommandExpiredError     a command could not be sent before its expiry: dropped
     └── ModbusError             a transaction did not succeed
         ├── BusError            the port or gateway is not reachable (unplugged, refused)
@@ -15,7 +17,10 @@
         ├── DeviceExceptionError the unit answered with an exception code; ``action`` says
         │                       what the device means by it (fail, retry, busy, refused,
         │                       locked) and ``meaning`` its name in the device's manual
-        └── FrameError          a frame could not be built or parsed (CRC, length)
+        ├── FrameError          a frame could not be built or parsed (CRC, length)
+        └── PartialWriteError   a compound write failed after its first frame: ``done`` of
+                                ``total`` frames were written, ``restored`` says whether the
+                                frames done were undone; ``cause`` is the failure
 
 Every error carries a message a user can act on; none is raised for a device fault
 (devices report through health counters, never by stopping the bridge).
@@ -60,6 +65,25 @@ class ValueRejectedError(CodecError):
     """A command value is refused before anything reaches the wire."""
 
 
+class CommandRejectedError(ValueRejectedError):
+    """Some keys of a command were refused, so none of its keys is written."""
+
+    def __init__(self, refused: dict[str, str], keys: Sequence[str]) -> None:
+        self.refused = dict(refused)
+        self.keys = tuple(keys)
+        others = [k for k in self.keys if k not in self.refused]
+        reasons = "; ".join(self.refused.values())
+        nothing = f"; nothing written (also not {', '.join(others)})" if others else ""
+        super().__init__(reasons + nothing)
+
+    def reason(self, key: str) -> str:
+        """Why ``key`` was not written: its own refusal, or the refusal of the others."""
+        if key in self.refused:
+            others = len(self.keys) > 1
+            return self.refused[key] + ("; nothing of this command was written" if others else "")
+        return f"not written: the same command had refused keys ({', '.join(self.refused)})"
+
+
 class CommandExpiredError(BridgeError):
     """A command could not be sent before its expiry; it was dropped, never sent late."""
 
@@ -88,3 +112,27 @@ class DeviceExceptionError(ModbusError):
 
 class FrameError(ModbusError):
     """A frame could not be built or parsed (bad CRC/LRC, truncated, unknown function)."""
+
+
+class PartialWriteError(ModbusError):
+    """A compound write failed after some of its frames were written."""
+
+    def __init__(
+        self,
+        done: int,
+        total: int,
+        *,
+        restored: bool,
+        cause: ModbusError,
+        now: str | None = None,
+    ) -> None:
+        self.done = done
+        self.total = total
+        self.restored = restored
+        self.cause = cause
+        undone = "undone again" if restored else "NOT undone"
+        message = (
+            f"written only in part: frame {done + 1} of {total} failed ({cause}); "
+            f"the {done} frame(s) before it were {undone}"
+        )
+        super().__init__(message if now is None else f"{message}; the device now reads {now}")

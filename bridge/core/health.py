@@ -1,11 +1,18 @@
 """Device health: what each transaction outcome means, counters, online/offline and backoff.
 
 Pure: the caller passes the monotonic time in. A device goes offline after
-``offline_after`` consecutive failures (timeouts, or exceptions the device means as
-failures) and is then tried once per backoff interval, doubling up to a cap, so that a
-dead unit costs its bus one timeout per interval instead of one per poll. The first
-answer brings it back online. Busy answers and refused addresses prove the device is
-alive and never count towards offline.
+``offline_after`` consecutive failures and is then tried once per backoff interval,
+doubling up to a cap, so that a dead unit costs its bus one timeout per interval instead
+of one per poll. Only a real answer (values) brings it back online. The failures:
+
+- a timeout, a bus or frame error, an exception the device means as a failure;
+- a poll in which it refused every read (``refuses_every_read``: the poller's
+  refusal_memory judged the pass a fault, not a map of holes);
+- answering only "busy" (05/06, or the device's own busy codes): busy answers are alive and
+  never failures on their own, but ``offline_after`` of them in a row spanning
+  ``busy_offline_after`` seconds with no value in between take the device offline.
+
+A refused address on its own neither counts nor clears anything: the pass decides.
 """
 
 from __future__ import annotations
@@ -53,12 +60,22 @@ class Transition(StrEnum):
     ONLINE = "online"
 
 
+class Fault(StrEnum):
+    """Why a device went offline."""
+
+    NO_ANSWER = "no_answer"  # timeouts, failure exceptions
+    REFUSES = "refuses"  # refused every read of its polls
+    BUSY = "busy"  # answered only "busy"
+
+
 @dataclass(frozen=True, slots=True)
 class HealthPolicy:
     offline_after: int = 3
     backoff_initial: float = 5.0
     backoff_max: float = 300.0
     backoff_factor: float = 2.0
+    busy_offline_after: float = 30.0  # seconds of answering only "busy" before offline
+    refusal_recheck: float = 600.0  # seconds a learnt refusal is trusted before a re-read
 
 
 @dataclass(slots=True)
@@ -72,11 +89,15 @@ class DeviceHealth:
     errors: int = 0
     timeouts: int = 0
     busy: int = 0
+    refusal_faults: int = 0  # polls refused as a whole (a device fault, nothing learnt)
     exceptions: Counter[int] = field(default_factory=Counter)
     last_latency: float | None = None
     last_success: float | None = None
     backoff: float = 0.0
     next_attempt: float = 0.0
+    fault: Fault | None = None  # why it is offline
+    busy_streak: int = 0  # busy answers since the last value
+    busy_since: float = 0.0  # the first of them
     latencies: deque[float] = field(default_factory=lambda: deque(maxlen=256))
 
     def record(
@@ -87,37 +108,78 @@ class DeviceHealth:
         if code is not None:
             self.exceptions[code] += 1
         if outcome in (Outcome.TIMEOUT, Outcome.FAILED):
-            return self._failure(outcome, now)
+            self.errors += 1
+            if outcome is Outcome.TIMEOUT:
+                self.timeouts += 1
+            return self._failure(Fault.NO_ANSWER, now)
         if outcome is Outcome.BUSY:
-            self.busy += 1
+            return self._busy(now)
+        if outcome is Outcome.REFUSED:
+            return None  # a hole or a device fault: the poller judges the whole pass
         if latency is not None:
             self.last_latency = latency
             self.latencies.append(latency)
         self.last_success = now
         self.consecutive_failures = 0
         self.backoff = 0.0
+        self.busy_streak = 0
         if self.online is not True:
-            self.online = True
+            self.online, self.fault = True, None
             return Transition.ONLINE
         return None
 
-    def _failure(self, outcome: Outcome, now: float) -> Transition | None:
-        self.errors += 1
-        if outcome is Outcome.TIMEOUT:
-            self.timeouts += 1
+    def refuses_every_read(self, now: float) -> Transition | None:
+        """Count a pass the device refused as a whole (not a map of holes) as a failure."""
+        self.refusal_faults += 1
+        return self._failure(Fault.REFUSES, now)
+
+    def offline_reason(self, now: float) -> str:
+        """Why the device is offline, for the log: 'after 3 failed requests'."""
+        if self.fault is Fault.BUSY:
+            return f"after {now - self.busy_since:.0f} s: answers only 'busy'"
+        if self.fault is Fault.REFUSES:
+            return f"after {self.consecutive_failures} failed polls: refuses every read"
+        return f"after {self.consecutive_failures} failed requests"
+
+    def _busy(self, now: float) -> Transition | None:
+        self.busy += 1
+        self.busy_streak += 1
+        if self.busy_streak == 1:
+            self.busy_since = now
+        if self.online is False:
+            self._back_off(now)  # a probe answered busy: not back yet
+            return None
+        policy = self.policy
+        if (
+            self.busy_streak >= policy.offline_after
+            and now - self.busy_since >= policy.busy_offline_after
+        ):
+            return self._offline(Fault.BUSY, now)
+        if self.online is None:
+            self.online = True  # first contact: the unit is there
+            return Transition.ONLINE
+        return None
+
+    def _failure(self, fault: Fault, now: float) -> Transition | None:
         self.consecutive_failures += 1
         if self.consecutive_failures < self.policy.offline_after:
             return None
+        return self._offline(fault, now)
+
+    def _offline(self, fault: Fault, now: float) -> Transition | None:
+        self._back_off(now)
+        if self.online is not False:
+            self.online, self.fault = False, fault
+            return Transition.OFFLINE
+        return None
+
+    def _back_off(self, now: float) -> None:
         policy = self.policy
         self.backoff = min(
             policy.backoff_max,
             policy.backoff_initial if not self.backoff else self.backoff * policy.backoff_factor,
         )
         self.next_attempt = now + self.backoff
-        if self.online is not False:
-            self.online = False
-            return Transition.OFFLINE
-        return None
 
     def may_poll(self, now: float) -> bool:
         """Online devices poll on schedule; offline ones only when their backoff ran out."""

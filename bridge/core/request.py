@@ -36,3 +36,20 @@ class Write:
     table: Table
     address: int
     values: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class WriteSequence:
+    """Writes that make one command (a sign and a magnitude, a pulse's edges, the keys of a
+    multi-key /set): sent back to back, never left half done.
+
+    ``undo[i]`` puts back what ``writes[i]`` changed (None: nothing to put back); when a
+    later write fails, the writes already done are undone in reverse order.
+    """
+
+    writes: tuple[Write, ...]
+    undo: tuple[Write | None, ...]
+
+    def __post_init__(self) -> None:
+        if not self.writes or len(self.undo) != len(self.writes):
+            raise ValueError("a write sequence has one undo (or None) per write, at least one")

@@ -54,6 +54,7 @@ class Quirks:
     max_read_registers: int | None = None  # None: the mapping's (and its segments') limits
     refuse_gaps: bool | None = None  # None: not protocol.readable_gaps
     refused: frozenset[int] = frozenset()  # holding addresses that answer exception 02
+    failing_writes: frozenset[int] = frozenset()  # holding addresses whose writes answer 04
     exception_code: int | None = None  # answer every request with this code
     coil_on_value: int | None = None  # None: protocol.coil_on_value
     latency: float = 0.0  # seconds added before every answer
@@ -243,6 +244,7 @@ class Rules:
     refuse_gaps: bool
     coil_on_value: int
     fixed_limit: bool  # a quirk set the read limit: segments' own limits do not apply
+    failing_writes: frozenset[int] = frozenset()  # holding writes answered "device failure"
 
     def check_read(self, table: Table, address: int, count: int) -> int | None:
         last = address + count - 1
@@ -267,6 +269,10 @@ class Rules:
             return 2
         if write.function == 5 and write.values[0] not in (0, self.coil_on_value):
             return 3
+        if write.table is Table.HOLDING and self.failing_writes.intersection(
+            range(write.address, last + 1)
+        ):
+            return 4
         return None
 
     def _read_limit(self, table: Table, first: int) -> int:
@@ -324,6 +330,7 @@ def build_rules(mapping: Mapping, points: AnyMapping[str, Point], quirks: Quirks
         refuse_gaps=not gaps,
         coil_on_value=on_value,
         fixed_limit=quirks.max_read_registers is not None,
+        failing_writes=quirks.failing_writes,
     )
 
 
