@@ -122,6 +122,9 @@ def response_values(pdu: ModbusPDU, request: Read) -> tuple[int, ...]:
     if isinstance(pdu, ExceptionResponse):
         raise FrameError(f"exception response, code {pdu.exception_code}")
     if request.table.is_bits:
+        whole_bytes = -(-request.count // 8) * 8  # bits come in whole bytes
+        if len(pdu.bits) != whole_bytes:
+            raise FrameError(f"asked for {request.count} bits, got {len(pdu.bits)} bits")
         values = tuple(int(bool(b)) for b in pdu.bits[: request.count])
     else:
         values = tuple(pdu.registers)

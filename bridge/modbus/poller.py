@@ -4,10 +4,8 @@ Poll: due classes -> precomputed plan -> scheduler (serialised, gap) -> register
 decode what was read fresh -> ``on_update`` with the values that changed. Missed ticks are
 skipped, not queued. An offline device is probed once per backoff interval only.
 
-Write: check (known, writable, dangerous-write guard, EEPROM rate limit) -> read what the
-write depends on (the word of a bit field, a sign register, limit registers, the current
-value of an EEPROM parameter) -> encode (type, range, enum) -> write ahead of polls ->
-read back -> publish. Anything refused raises before a byte reaches the wire.
+Writes go through the device's ``DeviceWriter`` (bridge/modbus/writer.py), which uses the
+poller's scheduler access (``submit``, ``read_block``), image, values and ``publish``.
 """
 
 from __future__ import annotations
@@ -16,33 +14,34 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from bridge.config import DeviceConfig
-from bridge.core.codec import Value, decode, encode
+from bridge.core.codec import Value, decode
 from bridge.core.entity import PollClass, Table
 from bridge.core.health import DeviceHealth, HealthPolicy, Outcome, Transition
 from bridge.core.mapping import Mapping, Point
-from bridge.core.planner import ReadLimits, limits_for, plan_reads
+from bridge.core.planner import ReadLimits, addresses_of, limits_for, plan_reads
 from bridge.core.protocol import Protocol
 from bridge.core.refusal import Refusal, refusal_search
-from bridge.core.request import Read, Write
+from bridge.core.refusal_memory import RefusalMemory, Verdict
+from bridge.core.request import Read, Write, WriteSequence
 from bridge.core.timing import LinkTiming
 from bridge.errors import (
     BusError,
-    CommandExpiredError,
     DeviceExceptionError,
     DeviceTimeoutError,
     FrameError,
     MissingDataError,
     ModbusError,
-    ValueRejectedError,
 )
 from bridge.modbus.scheduler import BusScheduler, Priority
+from bridge.modbus.writer import DeviceWriter, WriteCounters
 
 log = logging.getLogger(__name__)
 DEFAULT_POLICY = HealthPolicy()
 Address = tuple[Table, int]
+Refused = tuple[Read, DeviceExceptionError]  # a block refused whole, with the refusal
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,16 +52,6 @@ class DeviceUpdate:
     values: dict[str, Value]
     changed: frozenset[str]
     online: bool | None
-
-
-@dataclass(slots=True)
-class WriteCounters:
-    done: int = 0
-    skipped_unchanged: int = 0
-    rejected: int = 0
-    failed: int = 0
-    expired: int = 0
-    last_write: dict[int, float] = field(default_factory=dict)
 
 
 class DevicePoller:
@@ -90,10 +79,10 @@ class DevicePoller:
         self.retries = retries
         self.on_update = on_update
         self.health = DeviceHealth(policy)
-        self.writes = WriteCounters()
+        self.writer = DeviceWriter(self)
         self.image: dict[Address, int] = {}
         self.values: dict[str, Value] = {}
-        self.refused: set[Address] = set()
+        self.refusals = RefusalMemory(policy.refusal_recheck)
         self.max_read: int | None = None  # learnt: fewer registers per read than mapped
         self._plans: dict[PollClass, tuple[Read, ...]] = {}
         self._limits_cache: ReadLimits | None = None
@@ -131,32 +120,47 @@ class DevicePoller:
             wake = min(*next_due.values(), self._offline_wake())
             await asyncio.sleep(max(0.0, wake - time.monotonic()))
 
+    @property
+    def writes(self) -> WriteCounters:
+        """How the commands to this device ended (done, skipped, rejected, failed, expired)."""
+        return self.writer.counters
+
+    async def write(self, key: str, value: object, *, deadline: float | None = None) -> Value:
+        """Write one value (``write_many`` with one key); the value the device holds."""
+        return (await self.write_many({key: value}, deadline=deadline))[key]
+
+    async def write_many(
+        self, items: dict[str, object], *, deadline: float | None = None
+    ) -> dict[str, Value]:
+        """All or nothing: see ``DeviceWriter.write_many``."""
+        return await self.writer.write_many(items, deadline=deadline)
+
     def _offline_wake(self) -> float:
         return self.health.next_attempt if self.health.online is False else float("inf")
+
+    @property
+    def refused(self) -> frozenset[Address]:
+        """The addresses learnt as refused that plans avoid now (until their re-check)."""
+        return self.refusals.refused
 
     async def poll(self, classes: Iterable[PollClass]) -> None:
         """Read every point of these classes once and publish what changed."""
         chosen = set(classes)
+        self._recheck_refusals()
         fresh: set[Address] = set()
-        for read in self._plan(chosen):
-            timeouts = self.health.timeouts
-            if not await self._read(read, Priority.POLL, fresh) and (
-                self.health.timeouts > timeouts or self.health.online is False
-            ):
-                break  # a unit that stopped answering: the next cycle tries again
+        await self._read_pass(self._plan(chosen), Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
         keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
-        self._publish(keys, fresh)
+        self.publish(keys, fresh)
 
     async def read_now(self, keys: Iterable[str] | None = None) -> dict[str, Value]:
         """Read these points (all when None) ahead of the polls; return their values."""
         wanted = [self.points[k] for k in keys] if keys is not None else list(self.points.values())
         fresh: set[Address] = set()
-        limits = self._limits()
-        for read in plan_reads(wanted, limits).reads:
-            await self._read(read, Priority.READ_NOW, fresh)
-        self._publish([p.key for p in wanted], fresh)
+        limits = self.limits()
+        await self._read_pass(plan_reads(wanted, limits).reads, Priority.READ_NOW, fresh)
+        self.publish([p.key for p in wanted], fresh)
         return {p.key: self.values.get(p.key) for p in wanted}
 
     def _plan(self, classes: set[PollClass]) -> tuple[Read, ...]:
@@ -164,17 +168,17 @@ class DevicePoller:
         for poll_class in sorted(classes):
             if poll_class not in self._plans:
                 members = [p for p in self.points.values() if p.entity.poll_class is poll_class]
-                self._plans[poll_class] = plan_reads(members, self._limits()).reads
+                self._plans[poll_class] = plan_reads(members, self.limits()).reads
             reads.extend(self._plans[poll_class])
         return tuple(reads)
 
-    def _limits(self) -> ReadLimits:
+    def limits(self) -> ReadLimits:
         """The read limits as known now (cached; learning a refusal clears the cache)."""
         if self._limits_cache is None:
             self._limits_cache = limits_for(
                 self.mapping,
                 max_registers=self.max_read,
-                refused=frozenset(self.refused),
+                refused=self.refusals.refused,
                 timing=self.timing,
             )
         return self._limits_cache
@@ -183,24 +187,76 @@ class DevicePoller:
         self._plans.clear()
         self._limits_cache = None
 
-    async def _read(self, read: Read, priority: Priority, fresh: set[Address]) -> bool:
-        """One read; learns refused addresses by splitting a refused block."""
+    async def _read_pass(
+        self, reads: Iterable[Read], priority: Priority, fresh: set[Address], *, stop: bool = False
+    ) -> None:
+        """Read these blocks, then judge the blocks refused whole together: holes are
+        searched and learnt, a device refusing everything is a fault. ``stop``: give up
+        the pass when the unit stops answering (the next cycle tries again)."""
+        refused: list[Refused] = []
+        for read in reads:
+            timeouts = self.health.timeouts
+            if await self.read_block(read, priority, fresh, refused) or not stop:
+                continue
+            if self.health.timeouts > timeouts:
+                return  # silent: the refused blocks are judged another time
+            if self.health.online is False:
+                break  # probing an offline unit: one failed read settles it
+        await self._judge_refusals(refused, priority, fresh)
+
+    async def read_block(
+        self,
+        read: Read,
+        priority: Priority,
+        fresh: set[Address],
+        refused: list[Refused] | None = None,
+    ) -> bool:
+        """One read. A refusal is judged with the rest of the pass (added to ``refused``)
+        or, without a pass, on its own; True if the read (or a part of it) answered."""
         try:
-            values = await self._submit(read, priority)
+            values = await self.submit(read, priority)
         except DeviceExceptionError as exc:
-            if exc.action == "refused":
-                return await self._learn_refusal(read, priority, fresh, exc)
-            return False
+            if exc.action != "refused":
+                return False
+            if refused is not None:
+                refused.append((read, exc))
+                return False
+            return await self._judge_refusals([(read, exc)], priority, fresh)
         except ModbusError:
             return False
         self._keep(read, values, fresh)
         return True
 
-    async def _learn_refusal(
-        self, read: Read, priority: Priority, fresh: set[Address], exc: DeviceExceptionError
+    async def _judge_refusals(
+        self, refused: list[Refused], priority: Priority, fresh: set[Address]
     ) -> bool:
-        """Bisect a refused block with real reads; remember what the device refused (or the
-        smaller read limit it showed) so later plans avoid it. True if any part answered."""
+        """Search the blocks refused whole and learn their holes, unless the device refuses
+        what it answered before or everything (bridge/core/refusal_memory.py): then it is a
+        failure towards offline and nothing is learnt. True if any part answered."""
+        if not refused:
+            return False
+        verdict = self.refusals.judge(len(fresh), [addresses_of(r) for r, _ in refused])
+        if verdict is Verdict.FAULT:
+            self._refused_everything()
+            return False
+        alive, answered = verdict is Verdict.LEARN, False
+        for read, exc in sorted(refused, key=lambda item: item[0].count):
+            some, refusal = await self._search_refused(read, priority, fresh)
+            if refusal is None:
+                return answered  # the device stopped answering meanwhile: learn next time
+            answered = answered or some
+            alive = alive or some
+            if not alive and not self.refusals.explains(refusal.refused):
+                self._refused_everything()
+                return answered
+            self._remember(refusal, exc)
+        return answered
+
+    async def _search_refused(
+        self, read: Read, priority: Priority, fresh: set[Address]
+    ) -> tuple[bool, Refusal | None]:
+        """Bisect a refused block with real reads: whether any part answered, and what the
+        device refused (None when it stopped answering meanwhile)."""
         search = refusal_search(read, list(self.points.values()))
         answered = False
         try:
@@ -210,22 +266,14 @@ class DevicePoller:
                 answered = answered or ok
                 part = search.send(ok)
         except StopIteration as done:
-            refusal: Refusal = done.value
+            return answered, done.value
         except ModbusError:
-            return answered  # the device stopped answering meanwhile: learn next time
-        self._remember(refusal.refused, exc)
-        if refusal.max_count is not None:
-            self.max_read = min(self.max_read or refusal.max_count, refusal.max_count)
-            log.warning(
-                "%s: at most %d registers per read; plans adjusted", self.device.id, self.max_read
-            )
-            self._forget_plans()
-        return answered
+            return answered, None
 
     async def _probe(self, read: Read, priority: Priority, fresh: set[Address]) -> bool:
         """One read of a bisection: True answered (values kept), False refused."""
         try:
-            values = await self._submit(read, priority)
+            values = await self.submit(read, priority)
         except DeviceExceptionError as exc:
             if exc.action == "refused":
                 return False
@@ -237,19 +285,49 @@ class DevicePoller:
         for address, value in zip(read.span, values, strict=True):
             self.image[(read.table, address)] = value
             fresh.add((read.table, address))
-
-    def _remember(self, addresses: frozenset[Address], exc: DeviceExceptionError) -> None:
-        """Never read these addresses again (logged once, with the device's reason)."""
-        newly = addresses - self.refused
-        if newly:
-            shown = ", ".join(f"{t.value} {a}" for t, a in sorted(newly))
-            log.warning("%s refused %s (%s); not read again", self.device.id, shown, exc.meaning)
-            self.refused |= newly
+        back = self.refusals.answer(addresses_of(read))
+        if back:
+            log.info("%s answers %s again; read again", self.device.id, _shown(back))
             self._forget_plans()
 
-    async def _submit(
+    def _remember(self, refusal: Refusal, exc: DeviceExceptionError) -> None:
+        """Avoid what the device refused until the re-check (logged the first time, with the
+        device's reason), and read no more registers at once than it showed it takes."""
+        avoided = self.refusals.refused
+        first = self.refusals.learn(refusal.refused, time.monotonic())
+        if first:
+            log.warning(
+                "%s refused %s (%s); not read again for %.0f s",
+                self.device.id,
+                _shown(first),
+                exc.meaning,
+                self.refusals.recheck,
+            )
+        elif refusal.refused:
+            log.debug("%s refused %s again", self.device.id, _shown(refusal.refused))
+        if refusal.refused - avoided:
+            self._forget_plans()
+        if refusal.max_count is not None:
+            self.max_read = min(self.max_read or refusal.max_count, refusal.max_count)
+            log.warning(
+                "%s: at most %d registers per read; plans adjusted", self.device.id, self.max_read
+            )
+            self._forget_plans()
+
+    def _recheck_refusals(self) -> None:
+        """Forget the refusals learnt ``refusal_recheck`` ago: the next plan reads them."""
+        due = self.refusals.expire(time.monotonic())
+        if due:
+            log.debug("%s: reading %s again (refused before)", self.device.id, _shown(due))
+            self._forget_plans()
+
+    def _refused_everything(self) -> None:
+        """A pass refused as a whole: a device fault (nothing learnt), a failure."""
+        self._announce(self.health.refuses_every_read(time.monotonic()), first_contact=False)
+
+    async def submit(
         self,
-        request: Read | Write,
+        request: Read | Write | WriteSequence,
         priority: Priority,
         retries: int | None = None,
         deadline: float | None = None,
@@ -289,19 +367,29 @@ class DevicePoller:
         self._last_traffic = now
         first_contact = self.health.online is None
         transition = self.health.record(outcome, now, latency=latency, code=code)
+        self._announce(transition, first_contact=first_contact)
+
+    def _announce(self, transition: Transition | None, *, first_contact: bool) -> None:
+        """Log a change of state once (offline with the reason) and publish it."""
         if transition is None:
             return
         fields = {"device": self.device.id, "unit": self.device.unit, "bus": self.scheduler.bus_id}
         if transition is Transition.OFFLINE:
-            failures, backoff = self.health.consecutive_failures, self.health.backoff
+            health = self.health
+            failures, backoff = health.consecutive_failures, health.backoff
+            reason = health.offline_reason(time.monotonic())
             log.warning(
-                "%s (unit %d on %s) offline after %d failed requests; retrying every %.1f s "
-                "or later",
+                "%s (unit %d on %s) offline %s; retrying every %.1f s or later",
                 *fields.values(),
-                failures,
+                reason,
                 backoff,
                 extra=fields
-                | {"event": "device_offline", "failures": failures, "backoff_s": backoff},
+                | {
+                    "event": "device_offline",
+                    "failures": failures,
+                    "backoff_s": backoff,
+                    "reason": str(health.fault),
+                },
             )
         else:
             word = "online" if first_contact else "back online"
@@ -309,14 +397,15 @@ class DevicePoller:
             log.info("%s %s", self.device.id, word, extra=fields | {"event": event})
         self._notify(frozenset())
 
-    def _publish(self, keys: Iterable[str], fresh: set[Address]) -> None:
+    def publish(self, keys: Iterable[str], fresh: set[Address]) -> None:
         changed: set[str] = set()
+        refused = self.refusals.refused
         for key in keys:
             point = self.points[key]
             if not point.entity.readable:
                 continue
             span = {(point.table, a) for a in point.span}
-            if span & self.refused:
+            if span & refused:
                 value: Value = None
             elif span <= fresh:
                 try:
@@ -337,134 +426,6 @@ class DevicePoller:
                 DeviceUpdate(self.device.id, dict(self.values), changed, self.health.online)
             )
 
-    # --- writing ------------------------------------------------------------------
-
-    async def write(self, key: str, value: object, *, deadline: float | None = None) -> Value:
-        """Validate, write ahead of polls, read back; return the value the device holds.
-
-        ``deadline`` (monotonic): the first write must be sent by then, else the command is
-        dropped with CommandExpiredError; the writes after it (a sign, a pulse's second
-        half) always follow, so a command is never left half done. Every command ends in
-        one of ``self.writes``: done, skipped_unchanged, rejected, failed or expired.
-        """
-        try:
-            return await self._write(key, value, deadline)
-        except ValueRejectedError:
-            self.writes.rejected += 1
-            raise
-        except CommandExpiredError:
-            self.writes.expired += 1
-            raise
-        except (ModbusError, MissingDataError):
-            self.writes.failed += 1
-            raise
-
-    async def _write(self, key: str, value: object, deadline: float | None) -> Value:
-        point = self.points.get(key)
-        if point is None:
-            raise ValueRejectedError(f"{key}: no such entity on {self.device.id}")
-        entity = point.entity
-        self._check_allowed(point)
-        await self._refresh(_dependencies(point))
-        writes = encode(point, value, self.image)
-        if entity.eeprom and entity.readable and self._unchanged(point, writes):
-            self.writes.skipped_unchanged += 1  # the same value again: no wear, no refusal
-            return self.values.get(key, decode(point, self.image))
-        if entity.eeprom:
-            self._check_eeprom_rate(point)
-        retries = self.retries if entity.idempotent else 0
-        for index, write in enumerate(writes):
-            await self._submit(
-                write,
-                Priority.WRITE,
-                retries=retries,
-                deadline=deadline if index == 0 else None,
-            )
-            self._store(write)
-            if entity.eeprom:
-                self.writes.last_write[write.address] = time.monotonic()
-        self.writes.done += 1
-        if entity.readable and entity.press is None:
-            self._publish_acknowledged(point, writes)
-        if entity.verify and entity.readable:
-            return await self._read_back(point)
-        return _as_value(value) if entity.press is None else None
-
-    def _publish_acknowledged(self, point: Point, writes: tuple[Write, ...]) -> None:
-        """Publish what the device acknowledged at once (FC06/FC16 answer only after the
-        unit took the registers), before the read-back that confirms or corrects it: the
-        value is on MQTT one transaction earlier. Only where the written registers are the
-        ones read (not coils, not a separate command register)."""
-        if point.write_address != point.address or any(w.function in (5, 15) for w in writes):
-            return
-        written = {(w.table, w.address + i) for w in writes for i in range(len(w.values))}
-        if {(point.table, a) for a in point.span} <= written:
-            self._publish([point.key], written)
-
-    def _check_allowed(self, point: Point) -> None:
-        entity = point.entity
-        if not entity.writable:
-            raise ValueRejectedError(f"{point.key} is read-only")
-        if entity.dangerous and not self.device.allow_dangerous_writes:
-            raise ValueRejectedError(
-                f"{point.key} is a guarded write (dangerous); set allow_dangerous_writes: true "
-                f"for device {self.device.id} to permit it"
-            )
-
-    def _check_eeprom_rate(self, point: Point) -> None:
-        """An EEPROM parameter is rewritten at most once per ``eeprom_write_interval``."""
-        last = self.writes.last_write.get(point.write_address)
-        wait = self.protocol.eeprom_write_interval
-        if last is not None and time.monotonic() - last < wait:
-            left = wait - (time.monotonic() - last)
-            raise ValueRejectedError(
-                f"{point.key} is stored in EEPROM: next write allowed in {left:.0f} s"
-            )
-
-    async def _refresh(self, reads: list[Read]) -> None:
-        fresh: set[Address] = set()
-        for read in reads:
-            if not await self._read(read, Priority.READ_NOW, fresh):
-                raise MissingDataError(
-                    f"{self.device.id}: cannot read {read.table.value} {read.address} "
-                    "that the write depends on"
-                )
-
-    def _unchanged(self, point: Point, writes: tuple[Write, ...]) -> bool:
-        return (
-            all(
-                self.image.get((w.table, w.address + i)) == v
-                for w in writes
-                for i, v in enumerate(w.values)
-            )
-            and point.write_address == point.address
-        )
-
-    def _store(self, write: Write) -> None:
-        if write.function in (5, 15):
-            return  # coil commands may live in another space than the status bits
-        for offset, word in enumerate(write.values):
-            self.image[(write.table, write.address + offset)] = word
-
-    async def _read_back(self, point: Point) -> Value:
-        targets = [point] + ([point.sign] if point.sign is not None else [])
-        fresh: set[Address] = set()
-        for read in plan_reads(targets, self._limits()).reads:
-            await self._read(read, Priority.READ_NOW, fresh)
-        self._publish([point.key], fresh)
-        return self.values.get(point.key)
-
-
-def _dependencies(point: Point) -> list[Read]:
-    """What a write of ``point`` must read fresh first: the word of a bit field (even of a
-    write-only bit), a sign register, limit registers, an EEPROM parameter's current value."""
-    entity = point.entity
-    sources = [p for p in (point.sign, point.min_source, point.max_source) if p is not None]
-    reads = [Read(p.table, p.address, p.count) for p in sources]
-    if entity.field_width is not None or (entity.eeprom and entity.readable):
-        reads.append(Read(point.table, point.address, point.count))
-    return list(dict.fromkeys(reads))
-
 
 def _next_tick(due: float, interval: float | None, now: float) -> float:
     """The next tick of a fixed schedule after ``now``; ticks missed meanwhile are skipped."""
@@ -474,8 +435,8 @@ def _next_tick(due: float, interval: float | None, now: float) -> float:
     return due + (missed + 1) * interval
 
 
-def _as_value(value: object) -> Value:
-    return value if isinstance(value, bool | int | float | str) else None
+def _shown(addresses: Iterable[Address]) -> str:
+    return ", ".join(f"{t.value} {a}" for t, a in sorted(addresses))
 
 
 def _with_overrides(mapping: Mapping, device: DeviceConfig) -> Mapping:

@@ -7,10 +7,24 @@ must rest does not hold up the others. Between two frames the bus stays silent f
 least 3.5 characters at its baud rate. A lost port or gateway is reopened with backoff
 while jobs wait; every job still ends in its own deadline's error, never hangs.
 
+A write is never cut short: a compound write (``WriteSequence``: a sign and a magnitude,
+a pulse's edges, the keys of one /set) goes out frame after frame with nothing between
+them, and when a frame after the first fails the frames already written are undone. A
+command's deadline is checked right before its first frame is sent, never later: the
+frames after it always follow. When the bus is stopped (shutdown, a mapping reload), the
+write in flight is finished first, for at most ``FINISH_WRITE`` seconds.
+
 On links whose replies do not name their request (RTU, ASCII, RTU over TCP: no
-transaction id), the bus stays silent for one more timeout after a timeout: the unit may
-still answer, and its late reply would be taken for the answer to its next request
-(another block's registers under this block's keys) or collide with another unit's.
+transaction id), a unit that did not answer in time may still answer, and its late reply
+would be taken for the answer to its next request (another block's registers under this
+block's keys). So after a timeout the bus stays silent one more timeout (a late reply
+must not collide with another unit's, whose replies are told apart by unit id), the unit
+that timed out is not addressed again for ``LATE_GUARD`` timeouts (a reply up to three
+timeouts after its request is never taken for another of that unit's requests), and
+bytes arriving while no request is outstanding are discarded (pymodbus drops them) and
+keep the bus silent until the line has been quiet for ``SETTLE`` seconds; they count as
+frame errors and are logged once per burst. Every reply is checked against its request
+(unit, function code, byte count) by the transport.
 """
 
 from __future__ import annotations
@@ -25,13 +39,15 @@ from enum import IntEnum
 
 from bridge.core.health import exception_meaning
 from bridge.core.protocol import Protocol
-from bridge.core.request import Read, Write
+from bridge.core.request import Read, Write, WriteSequence
 from bridge.errors import (
     BusError,
     CommandExpiredError,
     DeviceExceptionError,
     DeviceTimeoutError,
     FrameError,
+    ModbusError,
+    PartialWriteError,
 )
 from bridge.modbus.transport import Transport
 
@@ -39,11 +55,15 @@ log = logging.getLogger(__name__)
 
 REOPEN_INITIAL = 0.5
 REOPEN_MAX = 30.0
+FINISH_WRITE = 2.0  # seconds a stopping bus gives the write in flight to end
+LATE_GUARD = 2.0  # timeouts a unit rests after a timeout on a link without transaction ids
+SETTLE = 0.1  # seconds of silence after bytes nobody asked for, before the next frame
+BURST = 10.0  # seconds: unsolicited bytes this far apart are logged as separate bursts
 
 
 class Priority(IntEnum):
-    WRITE = 0  # commands: before anything else
-    READ_NOW = 1  # reads for a command (read-modify-write, read-back, get)
+    WRITE = 0  # commands, and the reads that are part of one (read-modify-write, read-back)
+    READ_NOW = 1  # reads on request (/get, management reads)
     POLL = 2
 
 
@@ -52,7 +72,7 @@ class _Job:
     priority: int
     sequence: int
     unit: int = field(compare=False)
-    request: Read | Write = field(compare=False)
+    request: Read | Write | WriteSequence = field(compare=False)
     timeout: float = field(compare=False)
     retries: int = field(compare=False)
     protocol: Protocol = field(compare=False)
@@ -86,6 +106,9 @@ class BusScheduler:
         self._last_end = 0.0
         self._unit_last: dict[int, float] = {}
         self._quiet_until = 0.0  # after a timeout: a late reply may still come
+        self._resting: dict[int, float] = {}  # unit -> not addressed before (late replies)
+        self._unsolicited_seen = 0
+        self._unsolicited_logged = float("-inf")
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
 
@@ -96,7 +119,7 @@ class BusScheduler:
     async def submit(
         self,
         unit: int,
-        request: Read | Write,
+        request: Read | Write | WriteSequence,
         *,
         timeout: float,
         priority: Priority = Priority.POLL,
@@ -107,9 +130,10 @@ class BusScheduler:
         """Queue one transaction and wait for its result (or its error).
 
         ``protocol`` gives the device's own exception meanings and its minimum time
-        between two requests; ``retries`` resends after a timeout or a transmission error;
-        a job still waiting at ``deadline`` (monotonic) fails with CommandExpiredError and
-        is never sent.
+        between two requests; ``retries`` resends after a timeout or a transmission error
+        (each frame of a sequence); a job still waiting at ``deadline`` (monotonic) fails
+        with CommandExpiredError and is never sent. A sequence that fails after its first
+        frame raises PartialWriteError.
         """
         future: asyncio.Future[tuple[int, ...]] = asyncio.get_running_loop().create_future()
         job = _Job(
@@ -128,16 +152,22 @@ class BusScheduler:
         return await future
 
     async def run(self) -> None:
-        """Serve jobs until cancelled."""
+        """Serve jobs until cancelled; then every job still waiting (or cut short) is
+        cancelled, so no submitter waits for ever."""
+        in_flight: list[_Job] = []
         try:
             while True:
                 job = await self._next_job()
-                await self._serve(job)
+                in_flight[:] = [job]
+                if isinstance(job.request, Read):
+                    await self._serve(job)
+                else:
+                    await self._serve_to_the_end(job)
                 # let the job's submitter run first: its follow-up (the read-back after a
                 # write, a poll's next block) is queued before the next job is chosen
                 await asyncio.sleep(0)
         finally:
-            for job in self._queue:
+            for job in in_flight + self._queue:
                 if not job.future.done():
                     job.future.cancel()
             self.transport.close()
@@ -147,7 +177,7 @@ class BusScheduler:
         while True:
             self._queue = sorted(j for j in self._queue if not j.future.done())
             now = time.monotonic()
-            start = max(now, self._last_end + self.gap, self._quiet_until)
+            start = max(now, self._silent_from())
             ready_at = [(self._unit_ready(job, start), job) for job in self._queue]
             ready = [job for when, job in ready_at if when <= start]
             if ready and start > now:
@@ -164,48 +194,162 @@ class BusScheduler:
                 async with asyncio.timeout(delay):
                     await self._wakeup.wait()
 
+    def _silent_from(self) -> float:
+        """When the bus may carry the next frame: after the gap, after a timeout's quiet,
+        and ``SETTLE`` after the last bytes that arrived unasked (late replies, noise)."""
+        ready = max(self._last_end + self.gap, self._quiet_until)
+        if not self.late_replies:
+            return ready
+        transport = self.transport
+        if transport.unsolicited > self._unsolicited_seen:
+            self.counters.frame_errors += transport.unsolicited - self._unsolicited_seen
+            self._unsolicited_seen = transport.unsolicited
+            if transport.unsolicited_at - self._unsolicited_logged > BURST:
+                log.warning(
+                    "%s: bytes arrived while no request was outstanding (a late reply or "
+                    "noise); discarded, the bus waits for the line to be quiet",
+                    self.bus_id,
+                )
+            self._unsolicited_logged = transport.unsolicited_at
+        return max(ready, transport.unsolicited_at + SETTLE)
+
     def _unit_ready(self, job: _Job, start: float) -> float:
-        last = self._unit_last.get(job.unit)
-        interval = job.protocol.min_request_interval
-        return start if last is None else max(start, last + interval)
+        return max(start, self._unit_free(job.unit, job.protocol))
+
+    def _unit_free(self, unit: int, protocol: Protocol) -> float:
+        """When ``unit`` may be addressed: its pacing, and its rest after a timeout."""
+        last = self._unit_last.get(unit)
+        paced = float("-inf") if last is None else last + protocol.min_request_interval
+        return max(paced, self._resting.get(unit, float("-inf")))
+
+    async def _serve_to_the_end(self, job: _Job) -> None:
+        """Serve a write even while this bus task is being cancelled: the write in flight
+        (every frame of a sequence, or its undo) ends first, within ``FINISH_WRITE``."""
+        # Its own task, not the TaskGroup's: the group would cancel it together with the bus.
+        serving = asyncio.ensure_future(self._serve(job))
+        try:
+            await asyncio.shield(serving)
+        except asyncio.CancelledError:
+            if not serving.done():
+                try:
+                    async with asyncio.timeout(FINISH_WRITE):
+                        await asyncio.shield(serving)
+                    log.info("%s: the write in flight finished before stopping", self.bus_id)
+                except TimeoutError:
+                    serving.cancel()
+                    log.error(
+                        "%s: stopped %.0f s into a write to unit %d; it may be incomplete",
+                        self.bus_id,
+                        FINISH_WRITE,
+                        job.unit,
+                    )
+            raise
 
     async def _serve(self, job: _Job) -> None:
         """Run one job; a timeout or a transmission error sends it back to the queue while
         retries last, so a resend keeps the gap and the unit's pacing like any frame."""
         if job.future.done():  # the submitter gave up (cancelled)
             return
-        if job.deadline is not None and time.monotonic() > job.deadline:
-            _settle(job, CommandExpiredError("expired: not sent within the command expiry"))
+        if isinstance(job.request, WriteSequence):
+            await self._serve_sequence(job, job.request)
             return
         try:
+            values = await self._attempt(job, job.request, first=True)
+        except _Resend:
+            self._queue.append(job)
+            return
+        except ModbusError as error:
+            _settle(job, error)
+            return
+        except CommandExpiredError as expired:
+            _settle(job, expired)
+            return
+        if not job.future.done():
+            job.future.set_result(values)
+
+    async def _attempt(self, job: _Job, request: Read | Write, *, first: bool) -> tuple[int, ...]:
+        """One frame of ``job``: its result, or the error to end it with; ``_Resend`` when a
+        retry is left and the frame should be queued again. ``first``: the job's deadline
+        is checked right before the frame goes out (after the port is open)."""
+        try:
             await self._ensure_open()
-            values = await self._transaction(job)
+            if first and job.deadline is not None and time.monotonic() > job.deadline:
+                raise CommandExpiredError("expired: not sent within the command expiry")
+            return await self._transaction(job, request)
         except DeviceExceptionError as raw:
             meaning = exception_meaning(raw.code, job.protocol)
-            error: Exception = DeviceExceptionError(raw.code, meaning.name, meaning.action)
+            error: ModbusError = DeviceExceptionError(raw.code, meaning.name, meaning.action)
             resend = meaning.action == "retry"
         except DeviceTimeoutError as timeout:
             error, resend = timeout, True
         except (BusError, FrameError) as failure:
             error, resend = failure, False
-        else:
-            if not job.future.done():
-                job.future.set_result(values)
-            return
         if resend and job.retries > 0:
             job.retries -= 1
-            self._queue.append(job)
-            return
-        _settle(job, error)
+            raise _Resend from error
+        raise error
 
-    async def _transaction(self, job: _Job) -> tuple[int, ...]:
+    async def _serve_sequence(self, job: _Job, sequence: WriteSequence) -> None:
+        """Every frame of a compound write back to back (keeping the gap and the unit's
+        pacing); if one after the first fails, undo the frames done, newest first."""
+        for index, write in enumerate(sequence.writes):
+            try:
+                await self._frame(job, write, first=index == 0)
+            except (ModbusError, CommandExpiredError) as error:
+                if index == 0 or not isinstance(error, ModbusError):
+                    _settle(job, error)
+                    return
+                restored = await self._undo(job, sequence.undo[:index])
+                _settle(
+                    job,
+                    PartialWriteError(index, len(sequence.writes), restored=restored, cause=error),
+                )
+                return
+        if not job.future.done():
+            job.future.set_result(())
+
+    async def _frame(self, job: _Job, write: Write, *, first: bool) -> None:
+        """One frame of a sequence, resent in place while the job's retries last."""
+        while True:
+            await self._pause(job.unit, job.protocol)
+            try:
+                await self._attempt(job, write, first=first)
+                return
+            except _Resend:
+                continue
+
+    async def _undo(self, job: _Job, undo: tuple[Write | None, ...]) -> bool:
+        """Put back what the frames done changed, newest first; True if every undo went."""
+        restored = True
+        for write in reversed(undo):
+            if write is None:
+                continue
+            try:
+                await self._frame(job, write, first=False)
+            except ModbusError as error:
+                log.error(
+                    "%s: unit %d: undoing a partial write failed: %s", self.bus_id, job.unit, error
+                )
+                restored = False
+        return restored
+
+    async def _pause(self, unit: int, protocol: Protocol) -> None:
+        """The silence after the previous frame and the unit's own pacing."""
+        ready = max(self._silent_from(), self._unit_free(unit, protocol))
+        delay = ready - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+
+    async def _transaction(self, job: _Job, request: Read | Write) -> tuple[int, ...]:
         started = time.monotonic()
         try:
-            return await self.transport.execute(job.unit, job.request, job.timeout)
+            return await self.transport.execute(job.unit, request, job.timeout)
         except DeviceTimeoutError:
             self.counters.timeouts += 1
             if self.late_replies:
-                self._quiet_until = time.monotonic() + job.timeout
+                now = time.monotonic()
+                self._quiet_until = now + job.timeout
+                self._resting[job.unit] = now + LATE_GUARD * job.timeout
             raise
         except FrameError:
             self.counters.frame_errors += 1
@@ -242,6 +386,10 @@ class BusScheduler:
             log.info("%s: bus back", self.bus_id, extra={"event": "bus_up", "bus": self.bus_id})
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
+
+
+class _Resend(Exception):  # noqa: N818 - a signal inside the scheduler, never raised out
+    """A frame failed in a way worth sending it again, and the job has retries left."""
 
 
 def _settle(job: _Job, exc: Exception) -> None:

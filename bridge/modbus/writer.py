@@ -1,0 +1,318 @@
+"""One device's write path, beside its poller (bridge/modbus/poller.py).
+
+Write: check every key (known, writable, dangerous-write guard) -> read what the writes
+depend on (the word of a bit field, a sign register, limit registers, the current value
+of an EEPROM parameter) -> encode every key (type, range, enum, EEPROM rate limit; keys
+see the words the keys before them leave) -> one frame per word -> write ahead of polls,
+as one ``WriteSequence`` when there is more than one frame (undone if a later frame
+fails, finished before a stopping bus ends) -> publish what the unit acknowledged -> read
+back. Anything refused raises before a byte reaches the wire; one refused key refuses
+the whole command.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from bridge.core.codec import Value, decode, encode
+from bridge.core.entity import Table
+from bridge.core.mapping import Point
+from bridge.core.planner import plan_reads
+from bridge.core.request import Read, Write, WriteSequence
+from bridge.errors import (
+    CommandExpiredError,
+    CommandRejectedError,
+    MissingDataError,
+    ModbusError,
+    PartialWriteError,
+    ValueRejectedError,
+)
+from bridge.modbus.scheduler import Priority
+
+if TYPE_CHECKING:
+    from bridge.modbus.poller import DevicePoller
+
+log = logging.getLogger(__name__)
+Address = tuple[Table, int]
+
+
+@dataclass(slots=True)
+class WriteCounters:
+    done: int = 0
+    skipped_unchanged: int = 0
+    rejected: int = 0
+    failed: int = 0
+    expired: int = 0
+    last_write: dict[int, float] = field(default_factory=dict)
+
+
+class DeviceWriter:
+    """Writes to one device through its poller's scheduler, image and values."""
+
+    def __init__(self, poller: DevicePoller) -> None:
+        self.poller = poller
+        self.counters = WriteCounters()
+
+    async def write_many(
+        self, items: dict[str, object], *, deadline: float | None = None
+    ) -> dict[str, Value]:
+        """Validate every key, write them all ahead of polls, read back; return the values.
+
+        All or nothing: every key is checked and encoded before anything is sent, and one
+        refused key (CommandRejectedError, naming each) means nothing is written. The
+        frames of all keys go out as one sequence (a sign and a magnitude, a pulse, two bit
+        fields of one word) that is never left half done: if a frame after the first fails,
+        the frames done are undone and PartialWriteError says what the device holds now.
+        ``deadline`` (monotonic): the first frame must be sent by then, else the command is
+        dropped with CommandExpiredError. ``self.counters``: each key written (done) or
+        left unchanged (skipped_unchanged); each command rejected, failed or expired.
+        """
+        try:
+            return await self._write_many(items, deadline)
+        except ValueRejectedError:
+            self.counters.rejected += 1
+            raise
+        except CommandExpiredError:
+            self.counters.expired += 1
+            raise
+        except (ModbusError, MissingDataError):
+            self.counters.failed += 1
+            raise
+
+    async def _write_many(
+        self, items: dict[str, object], deadline: float | None
+    ) -> dict[str, Value]:
+        points = self._allowed(items)
+        await self._refresh(list(dict.fromkeys(r for p in points for r in _dependencies(p))))
+        plan = self._encode_all(points, items)
+        held = {p.key: self._held(p) for p in points if p.key not in plan}
+        if not plan:
+            return held  # every key unchanged (EEPROM): nothing to write
+        writes = _one_frame_per_word(plan, {p.key for p in points if p.entity.pulse})
+        retries = self.poller.retries if all(p.entity.idempotent for p in points) else 0
+        request: Write | WriteSequence = (
+            writes[0]
+            if len(writes) == 1
+            else WriteSequence(tuple(writes), _undo(writes, self.poller.image))
+        )
+        try:
+            await self.poller.submit(request, Priority.WRITE, retries=retries, deadline=deadline)
+        except PartialWriteError as partial:
+            raise await self._report_partial(points, partial) from None
+        for write in writes:
+            self._store(write)
+        self.counters.done += len(plan)  # per key, like skipped_unchanged
+        written = [p for p in points if p.key in plan]
+        for point in written:
+            if point.entity.eeprom:
+                self.counters.last_write[point.write_address] = time.monotonic()
+            if point.entity.readable and point.entity.press is None:
+                self._publish_acknowledged(point, plan[point.key])
+        for point in written:
+            held[point.key] = await self._written_value(point, items[point.key])
+        return {p.key: held[p.key] for p in points}
+
+    def _allowed(self, items: dict[str, object]) -> list[Point]:
+        """The points of a command, each known, writable and not guarded; else nothing."""
+        points: list[Point] = []
+        refused: dict[str, str] = {}
+        for key in items:
+            point = self.poller.points.get(key)
+            try:
+                if point is None:
+                    raise ValueRejectedError(f"{key}: no such entity on {self.poller.device.id}")
+                self._check_allowed(point)
+            except ValueRejectedError as exc:
+                refused[key] = str(exc)
+                continue
+            points.append(point)
+        if refused:
+            raise CommandRejectedError(refused, list(items))
+        return points
+
+    def _encode_all(
+        self, points: list[Point], items: dict[str, object]
+    ) -> dict[str, tuple[Write, ...]]:
+        """Every key encoded against what the device holds, each key seeing the words the
+        keys before it leave (two bit fields of one word); unchanged EEPROM values left
+        out. CommandRejectedError naming every refused key."""
+        after: dict[Address, int] = dict(self.poller.image)
+        plan: dict[str, tuple[Write, ...]] = {}
+        refused: dict[str, str] = {}
+        for point in points:
+            entity = point.entity
+            try:
+                writes = encode(point, items[point.key], after)
+                if entity.eeprom and entity.readable and _unchanged(point, writes, after):
+                    self.counters.skipped_unchanged += 1  # no wear, no refusal
+                    continue
+                if entity.eeprom:
+                    self._check_eeprom_rate(point)
+            except ValueRejectedError as exc:
+                refused[point.key] = str(exc)
+                continue
+            plan[point.key] = writes
+            for write in writes:
+                after |= _stored(write)
+        if refused:
+            raise CommandRejectedError(refused, list(items))
+        return plan
+
+    def _held(self, point: Point) -> Value:
+        """The value the device holds as last read (an unchanged EEPROM parameter)."""
+        if point.key in self.poller.values:
+            return self.poller.values[point.key]
+        try:
+            return decode(point, self.poller.image)
+        except MissingDataError:
+            return None
+
+    async def _written_value(self, point: Point, value: object) -> Value:
+        if point.entity.verify and point.entity.readable:
+            return await self._read_back(point)
+        return _as_value(value) if point.entity.press is None else None
+
+    async def _report_partial(
+        self, points: list[Point], partial: PartialWriteError
+    ) -> PartialWriteError:
+        """Read what the device holds after a compound write failed half way, log it at
+        ERROR and return the error that says so (for ``<device>/error``)."""
+        readable = [p for p in points if p.entity.readable]
+        now: dict[str, Value] = {}
+        for point in readable:
+            try:
+                now[point.key] = await self._read_back(point)
+            except ModbusError:
+                now[point.key] = None
+        shown = ", ".join(f"{k}={v!r}" for k, v in now.items()) or "nothing readable"
+        error = PartialWriteError(
+            partial.done, partial.total, restored=partial.restored, cause=partial.cause, now=shown
+        )
+        log.error("%s: %s", self.poller.device.id, error)
+        return error
+
+    def _publish_acknowledged(self, point: Point, writes: tuple[Write, ...]) -> None:
+        """Publish what the device acknowledged at once (FC06/FC16 answer only after the
+        unit took the registers), before the read-back that confirms or corrects it: the
+        value is on MQTT one transaction earlier. Only where the written registers are the
+        ones read (not coils, not a separate command register)."""
+        if point.write_address != point.address or any(w.function in (5, 15) for w in writes):
+            return
+        written = {(w.table, w.address + i) for w in writes for i in range(len(w.values))}
+        if {(point.table, a) for a in point.span} <= written:
+            self.poller.publish([point.key], written)
+
+    def _check_allowed(self, point: Point) -> None:
+        entity = point.entity
+        if not entity.writable:
+            raise ValueRejectedError(f"{point.key} is read-only")
+        if entity.dangerous and not self.poller.device.allow_dangerous_writes:
+            raise ValueRejectedError(
+                f"{point.key} is a guarded write (dangerous); set allow_dangerous_writes: true "
+                f"for device {self.poller.device.id} to permit it"
+            )
+
+    def _check_eeprom_rate(self, point: Point) -> None:
+        """An EEPROM parameter is rewritten at most once per ``eeprom_write_interval``."""
+        last = self.counters.last_write.get(point.write_address)
+        wait = self.poller.protocol.eeprom_write_interval
+        if last is not None and time.monotonic() - last < wait:
+            left = wait - (time.monotonic() - last)
+            raise ValueRejectedError(
+                f"{point.key} is stored in EEPROM: next write allowed in {left:.0f} s"
+            )
+
+    async def _refresh(self, reads: list[Read]) -> None:
+        fresh: set[Address] = set()
+        for read in reads:
+            if not await self.poller.read_block(read, Priority.WRITE, fresh):
+                raise MissingDataError(
+                    f"{self.poller.device.id}: cannot read {read.table.value} {read.address} "
+                    "that the write depends on"
+                )
+
+    def _store(self, write: Write) -> None:
+        self.poller.image.update(_stored(write))
+
+    async def _read_back(self, point: Point) -> Value:
+        targets = [point] + ([point.sign] if point.sign is not None else [])
+        fresh: set[Address] = set()
+        for read in plan_reads(targets, self.poller.limits()).reads:
+            await self.poller.read_block(read, Priority.WRITE, fresh)
+        self.poller.publish([point.key], fresh)
+        return self.poller.values.get(point.key)
+
+
+def _dependencies(point: Point) -> list[Read]:
+    """What a write of ``point`` must read fresh first: the word of a bit field (even of a
+    write-only bit), a sign register, limit registers, an EEPROM parameter's current value."""
+    entity = point.entity
+    sources = [p for p in (point.sign, point.min_source, point.max_source) if p is not None]
+    reads = [Read(p.table, p.address, p.count) for p in sources]
+    if entity.field_width is not None or (entity.eeprom and entity.readable):
+        reads.append(Read(point.table, point.address, point.count))
+    return list(dict.fromkeys(reads))
+
+
+def _stored(write: Write) -> dict[Address, int]:
+    """The words a register write leaves in the image; coil commands leave nothing (they
+    may live in another space than the status bits)."""
+    if write.function in (5, 15):
+        return {}
+    return {(write.table, write.address + i): word for i, word in enumerate(write.values)}
+
+
+def _unchanged(point: Point, writes: tuple[Write, ...], image: dict[Address, int]) -> bool:
+    """The device already holds what these writes would put there (EEPROM skip)."""
+    return (
+        point.write_address == point.address
+        and all(image.get(cell) == word for w in writes for cell, word in _stored(w).items())
+        and all(w.function not in (5, 15) for w in writes)
+    )
+
+
+def _one_frame_per_word(plan: dict[str, tuple[Write, ...]], pulses: set[str]) -> list[Write]:
+    """The frames of a command in key order. Where several keys write the same register
+    (bit fields of one word), the word goes out once, at the first key's place, holding
+    every key's bits (each key was encoded over the word the keys before it left): one
+    EEPROM write, not several. Registers a pulse writes keep every frame."""
+    frames = [(key, w) for key, writes in plan.items() for w in writes]
+    pulsed = {(w.table, w.address) for key, w in frames if key in pulses}
+    final: dict[tuple[Table, int, int], Write] = {}
+    for key, w in frames:
+        if key not in pulses and w.function in (6, 16) and (w.table, w.address) not in pulsed:
+            final[(w.table, w.address, len(w.values))] = w
+    result: list[Write] = []
+    sent: set[tuple[Table, int, int]] = set()
+    for key, w in frames:
+        place = (w.table, w.address, len(w.values))
+        if key in pulses or place not in final:
+            result.append(w)
+        elif place not in sent:
+            sent.add(place)
+            result.append(final[place])
+    return result
+
+
+def _undo(writes: list[Write], image: dict[Address, int]) -> tuple[Write | None, ...]:
+    """For each write, the write that puts back what the device held before it (as far
+    as the image knows; None where it does not: a write-only command register, a coil
+    command). Writes earlier in the list are taken into account."""
+    before = dict(image)
+    undo: list[Write | None] = []
+    for write in writes:
+        cells = [(write.table, write.address + i) for i in range(len(write.values))]
+        if write.function in (5, 15) or any(cell not in before for cell in cells):
+            undo.append(None)
+        else:
+            old = tuple(before[cell] for cell in cells)
+            undo.append(Write(write.function, write.table, write.address, old))
+        before |= _stored(write)
+    return tuple(undo)
+
+
+def _as_value(value: object) -> Value:
+    return value if isinstance(value, bool | int | float | str) else None
