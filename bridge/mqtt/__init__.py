@@ -1,7 +1,13 @@
 """The MQTT edge: one broker session (``MqttClient``) and the reconnect loop around it."""
 
 from bridge.mqtt.client import Message, MqttClient, run_with_reconnect
-from bridge.mqtt.errors import MqttConnectError, MqttDisconnectedError, MqttError, MqttRefusedError
+from bridge.mqtt.errors import (
+    MqttConnectError,
+    MqttDisconnectedError,
+    MqttError,
+    MqttPublishError,
+    MqttRefusedError,
+)
 
 __all__ = [
     "Message",
@@ -9,6 +15,7 @@ __all__ = [
     "MqttConnectError",
     "MqttDisconnectedError",
     "MqttError",
+    "MqttPublishError",
     "MqttRefusedError",
     "run_with_reconnect",
 ]

@@ -10,6 +10,20 @@ messages are ``Message`` values, decoupled from paho. The caller owns the reconn
 aiomqtt 2.5 drops paho's DUP flag when it wraps a message, so ``_Connection`` overrides
 aiomqtt's (private) ``_on_message`` hook to keep it; the pinned minor keeps that stable
 and tests/integration/test_mqtt_client.py checks it against a broker that sets DUP.
+aiomqtt also ignores the reason code of an MQTT 5 PUBACK; ``_Connection`` overrides
+``_on_publish`` so that a publish the broker refuses (an ACL: 0x87 not authorised) is
+logged once per topic at WARNING instead of passing for delivered.
+
+Safety on MQTT 5: ``subscribe(..., live_only=True)`` asks the broker not to send retained
+messages at all (retain handling 2) and to keep the retain flag of live ones (retain as
+published), so the caller can refuse a command published with retain; the CONNECT
+announces ``MAX_PACKET`` as the largest packet the bridge accepts (the broker drops
+bigger ones instead of sending them); ``Message.expiry`` carries the publisher's message
+expiry interval (the time it has left).
+
+Anything a broker answers that the protocol does not allow (a SUBACK with the wrong
+number of codes, a packet paho cannot parse) ends the session with
+MqttDisconnectedError, so the reconnect loop starts a new one; it never ends the process.
 """
 
 from __future__ import annotations
@@ -28,11 +42,16 @@ from urllib.parse import urlsplit
 import aiomqtt
 import paho.mqtt.client as paho
 from aiomqtt.exceptions import MqttConnectError as _RefusedByBroker
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+from paho.mqtt.reasoncodes import ReasonCode
+from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from bridge.config import MqttConfig, TlsConfig
 from bridge.mqtt.errors import (
     MqttConnectError,
     MqttDisconnectedError,
+    MqttPublishError,
     MqttRefusedError,
 )
 
@@ -41,7 +60,8 @@ OFFLINE = b"offline"
 _UNSUPPORTED_PROTOCOL_VERSION = 0x84  # CONNACK reason code (3.1.1 return code 1 maps to it)
 _TIMEOUT = 10.0  # seconds for CONNACK, PUBACK, SUBACK, UNSUBACK
 _CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
-_FAILURE = 0x80  # SUBACK reason codes from 0x80 up are failures
+_FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
+MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
 
 _log = logging.getLogger(__name__)
 
@@ -56,14 +76,21 @@ class Message:
     retain: bool
     duplicate: bool
     mid: int | None  # the packet identifier of a QoS 1/2 delivery, None for QoS 0
+    expiry: float | None = None  # MQTT 5 message expiry: seconds it has left, None: none
 
 
 class _Received(aiomqtt.Message):
     """aiomqtt's message plus the DUP flag that aiomqtt leaves out."""
 
     def __init__(self, message: paho.MQTTMessage) -> None:
+        properties = getattr(message, "properties", None)
         super().__init__(
-            message.topic, bytes(message.payload), message.qos, message.retain, message.mid, None
+            message.topic,
+            bytes(message.payload),
+            message.qos,
+            message.retain,
+            message.mid,
+            properties,
         )
         self.duplicate = bool(message.dup)
 
@@ -74,6 +101,23 @@ class _Connection(aiomqtt.Client):
     def __init__(self, hostname: str, port: int, **options: Any) -> None:
         super().__init__(hostname, port, **options)
         self.collectors: dict[str, asyncio.Queue[_Received]] = {}
+        self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
+
+    def _on_publish(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        mid: int,
+        reason_code: ReasonCode,
+        properties: Properties,
+    ) -> None:
+        if isinstance(reason_code, ReasonCode) and reason_code.value >= _FAILURE:
+            message = self._client._out_messages.get(mid)
+            topic = message.topic if message is not None else f"message {mid}"
+            level = logging.DEBUG if topic in self.refused_topics else logging.WARNING
+            self.refused_topics.add(topic)
+            _log.log(level, "the broker refused a publish to %s: %s", topic, reason_code)
+        super()._on_publish(client, userdata, mid, reason_code, properties)
 
     def _on_message(self, _client: paho.Client, _userdata: Any, message: paho.MQTTMessage) -> None:
         received = _Received(message)
@@ -143,9 +187,14 @@ class MqttClient:
             raise MqttConnectError(
                 f"{config.url}: cannot read the password: {exc.strerror}"
             ) from exc
+        limits = None
+        if protocol is aiomqtt.ProtocolVersion.V5:
+            limits = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+            limits.MaximumPacketSize = MAX_PACKET
         connection = _Connection(
             config.host,
             config.port,
+            properties=limits,
             identifier=self._client_id,
             username=config.username,
             password=password,
@@ -204,19 +253,39 @@ class MqttClient:
         try:
             await connection.publish(topic, payload, level, retain)
         except aiomqtt.MqttError as exc:
-            raise MqttDisconnectedError(f"publish to {topic}: {exc}") from exc
+            raise MqttDisconnectedError(f"publish to {topic[:200]}: {exc}") from exc
+        except ValueError as exc:  # paho: an invalid topic, a payload beyond 256 MB
+            raise MqttPublishError(f"cannot publish to {topic[:200]}: {exc}") from None
         _restore_lost_cancel()
 
-    async def subscribe(self, *filters: str, qos: int = 1) -> None:
-        """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused."""
+    async def subscribe(self, *filters: str, qos: int = 1, live_only: bool = False) -> None:
+        """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused.
+
+        ``live_only`` (command topics): on MQTT 5 the broker sends no retained message and
+        keeps the retain flag of live ones; on 3.1.1 the caller refuses retained messages.
+        """
         connection = self._require()
         if not filters:
             return
+        topics: list[tuple[str, int]] | list[tuple[str, SubscribeOptions]]
+        topics = [(f, qos) for f in filters]
+        if live_only and self._protocol == "5":
+            options = SubscribeOptions(
+                qos=qos,
+                retainAsPublished=True,
+                retainHandling=SubscribeOptions.RETAIN_DO_NOT_SEND,
+            )
+            topics = [(f, options) for f in filters]
         try:
-            codes = await connection.subscribe([(f, qos) for f in filters])
+            codes = await connection.subscribe(topics)
         except aiomqtt.MqttError as exc:
             raise MqttDisconnectedError(f"subscribe to {', '.join(filters)}: {exc}") from exc
         _restore_lost_cancel()
+        if not isinstance(codes, list | tuple) or len(codes) != len(filters):
+            raise MqttDisconnectedError(
+                f"the broker answered a SUBSCRIBE of {len(filters)} filters with a SUBACK "
+                "that does not match it; reconnecting"
+            )
         refused = [f for f, code in zip(filters, codes, strict=True) if _value(code) >= _FAILURE]
         if refused:
             raise MqttRefusedError(f"the broker refused the subscription to {', '.join(refused)}")
@@ -296,6 +365,7 @@ def _value(code: int | Any) -> int:
 
 
 def _message(received: aiomqtt.Message) -> Message:
+    expiry = getattr(received.properties, "MessageExpiryInterval", None)
     return Message(
         topic=received.topic.value,
         payload=bytes(received.payload),
@@ -303,6 +373,7 @@ def _message(received: aiomqtt.Message) -> Message:
         retain=bool(received.retain),
         duplicate=isinstance(received, _Received) and received.duplicate,
         mid=received.mid if received.qos > 0 else None,
+        expiry=float(expiry) if isinstance(expiry, int) else None,
     )
 
 

@@ -10,8 +10,10 @@
         │                           translated: 4 -> 134), else None
         ├── MqttDisconnectedError   an established session was lost (socket closed, keepalive
         │                           expired, broker restarted) or an operation on it timed out
-        └── MqttRefusedError        the broker answered a SUBSCRIBE with a failure code (an
-                                    ACL); the session itself is fine
+        ├── MqttRefusedError        the broker answered a SUBSCRIBE with a failure code (an
+        │                           ACL); the session itself is fine
+        └── MqttPublishError        one message cannot be published (a topic MQTT does not
+                                    allow, a payload beyond 256 MB); the session is fine
 
 ``run_with_reconnect`` retries after MqttConnectError and MqttDisconnectedError (bare or
 inside an ExceptionGroup from the session's TaskGroup); every other error propagates.
@@ -40,3 +42,7 @@ class MqttDisconnectedError(MqttError):
 
 class MqttRefusedError(MqttError):
     """The broker refused a subscription (typically an ACL)."""
+
+
+class MqttPublishError(MqttError):
+    """One message cannot be published (invalid topic, payload too large); nothing sent."""

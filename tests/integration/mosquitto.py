@@ -39,6 +39,7 @@ class Broker:
     users: dict[str, str] = field(default_factory=dict)
     tls: TlsFiles | None = None
     require_certificate: bool = False
+    acl: list[str] = field(default_factory=list)  # acl_file lines (anonymous clients)
     host: str = HOST
     port: int = 0
     process: subprocess.Popen[bytes] | None = None
@@ -112,6 +113,10 @@ class Broker:
         ]
         if self.users:
             lines.append(f"password_file {self._password_file()}")
+        if self.acl:
+            acl = self.workdir / "acl"
+            acl.write_text("\n".join(self.acl) + "\n")
+            lines.append(f"acl_file {acl}")
         if self.tls:
             lines += [
                 f"cafile {self.tls.ca}",
