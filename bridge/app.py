@@ -4,9 +4,12 @@
 MQTT session, which reconnects by itself. Every (re)connect subscribes to the command
 topics, clears retained discovery configs the bridge no longer produces, publishes
 discovery and the whole state. Pollers report changes; a publisher sends the device's
-JSON, the changed plain values and its availability. Commands run per device in arrival
-order, each with an expiry: one that could not run in time is dropped with an error,
-never executed late; anything refused or failing goes to ``<base>/<device>/error``.
+JSON, the changed plain values and its availability. Commands go through the dispatcher
+(bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
+anything refused or failing goes to ``<base>/<device>/error``. Handling one message never
+waits for a device or a broker round trip, and no exception from one message leaves the
+message loop. Home Assistant's ``online`` asks for one republish (however many arrive
+while it waits). At most ``MAX_REQUESTS`` management requests run at a time.
 Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
 optional metrics endpoint serves the same counters for the whole run.
 """
@@ -16,13 +19,13 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from bridge import __version__
 from bridge.config import LoadedConfig
-from bridge.core.commands import Command, RecentMessages, parse_get, parse_set
+from bridge.core.commands import check_size, error_document
 from bridge.core.discovery import (
     Origin,
     Publish,
@@ -30,17 +33,19 @@ from bridge.core.discovery import (
 from bridge.core.health_report import HealthReporter
 from bridge.core.management_request import response
 from bridge.core.state import plain_payload, published, state_document
-from bridge.core.topics import Action, Topics
+from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
-from bridge.errors import BridgeError, ValueRejectedError
+from bridge.dispatcher import RETAINED, Dispatcher
+from bridge.errors import ValueRejectedError
 from bridge.management import Management
 from bridge.metrics import serve_metrics
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
-from bridge.mqtt import Message, MqttClient, MqttError, run_with_reconnect
+from bridge.mqtt import Message, MqttClient, MqttError, MqttPublishError, run_with_reconnect
 
 log = logging.getLogger(__name__)
 OUTBOX = 200  # non-retained messages kept while the broker is away
+MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
 
 
 class Bridge:
@@ -57,16 +62,24 @@ class Bridge:
         self._wake = asyncio.Event()
         self._dirty: dict[str, set[str]] = {}
         self._outbox: deque[Publish] = deque(maxlen=OUTBOX)
+        self.dropped = 0  # messages the full outbox dropped (counted in bridge/health)
         self._availability: dict[str, str] = {}
-        self._recent = RecentMessages(window=max(60.0, 10 * self.mqtt.command_expiry))
-        self._locks: dict[str, asyncio.Lock] = {}
+        self.dispatcher = Dispatcher(
+            self.engine,
+            self.mqtt.command_expiry,
+            spawn=self._spawn,
+            error=self._error,
+            read=self._read_done,
+        )
+        self._requests = 0  # management requests running
         self._group: asyncio.TaskGroup | None = None
         self._health = HealthReporter()  # rates since the previous report
         self.mqtt_state = "connecting"  # "online" while connected, "offline" between
         self.management = Management(
             loaded, self.engine, on_reload=self._reloaded, mqtt_state=lambda: self.mqtt_state
         )
-        self._republish = False
+        self._republish = False  # after a mapping reload: info, discovery and state
+        self._ha_online = False  # Home Assistant said online: discovery and state again
 
     # --- running ----------------------------------------------------------------------
 
@@ -88,8 +101,10 @@ class Bridge:
 
     async def _session(self, client: MqttClient) -> None:
         """One connection: subscribe, clean up, publish everything, then serve."""
-        filters = (*self.topics.command_filters(), self.topics.bridge_requests)
-        await client.subscribe(*filters, qos=max(1, self.mqtt.qos))
+        topics = self.topics
+        commands = (*topics.command_filters(), topics.bridge_requests)
+        await client.subscribe(*commands, qos=max(1, self.mqtt.qos), live_only=True)
+        await client.subscribe(topics.ha_status, qos=max(1, self.mqtt.qos))
         await self._publish_info(client)
         await self.discovery.publish(client, clear_stale=True)
         await self._publish_everything(client)
@@ -99,7 +114,7 @@ class Bridge:
                 group.create_task(self._refresher(client))
                 group.create_task(self._health_reports(client))
                 async for message in client.messages():
-                    await self._handle(client, message)
+                    self._handle(message)
         except ExceptionGroup as failed:
             raise _first(failed) from None
 
@@ -119,6 +134,13 @@ class Bridge:
         interval = self.loaded.config.bridge.health_interval
         while interval > 0:
             report = self._health.report(self.engine.snapshot())
+            counters = self.dispatcher.counters
+            report["messages"] = {
+                "commands": counters.commands,
+                "refused": counters.refused,
+                "coalesced": counters.coalesced,
+                "dropped": self.dropped,
+            }
             await client.publish(self.topics.bridge_health, json.dumps(report), retain=False)
             await asyncio.sleep(interval)
 
@@ -130,9 +152,14 @@ class Bridge:
 
     async def _flush(self, client: MqttClient) -> None:
         if self._republish:  # after a mapping reload: new entities, new discovery
-            self._republish = False
+            self._republish = self._ha_online = False
             await self._publish_info(client)
             await self.discovery.publish(client, clear_stale=True)
+            await self._publish_everything(client)
+        if self._ha_online:  # however many "online" came meanwhile: once
+            self._ha_online = False
+            log.info("Home Assistant is online: publishing discovery and state again")
+            await self.discovery.publish(client)
             await self._publish_everything(client)
         dirty, self._dirty = self._dirty, {}
         devices_changed = False
@@ -145,7 +172,10 @@ class Bridge:
             await self._publish_devices_list(client)
         while self._outbox:
             message = self._outbox.popleft()
-            await client.publish(message.topic, message.payload, retain=message.retain)
+            try:
+                await client.publish(message.topic, message.payload, retain=message.retain)
+            except MqttPublishError as exc:
+                log.warning("%s", exc)
 
     async def _publish_device(
         self, client: MqttClient, poller: DevicePoller, keys: set[str]
@@ -191,103 +221,76 @@ class Bridge:
 
     # --- commands ---------------------------------------------------------------------
 
-    async def _handle(self, client: MqttClient, message: Message) -> None:
+    def _handle(self, message: Message) -> None:
+        """Route one message; never waits, and nothing it raises leaves the message loop."""
+        try:
+            self._route(message)
+        except Exception:  # one message must never stop the bridge
+            log.exception("a message on %s could not be handled", message.topic[:200])
+
+    def _route(self, message: Message) -> None:
         request = self.topics.parse_request(message.topic)
         if request is not None:
-            self._spawn(self._answer(request, message.payload))
+            self._request(request, message)
             return
         if message.topic == self.topics.ha_status:
             if message.payload.strip() == b"online":
-                log.info("Home Assistant is online: publishing discovery and state again")
-                await self.discovery.publish(client)
-                await self._publish_everything(client)
+                self._ha_online = True
+                self._wake.set()
             return
         target = self.topics.parse_command(message.topic)
-        if target is None:
-            return
-        now = time.monotonic()
-        if self._recent.is_duplicate(
-            message.topic, message.payload, message.mid, message.duplicate, now
-        ):
-            log.info("ignoring a redelivered duplicate on %s", message.topic)
-            return
-        try:
-            if target.action is Action.GET:
-                keys = parse_get(message.payload)
-                self._spawn(self._read_now(target.device_id, keys))
-                return
-            items = parse_set(message.payload, target.key)
-        except ValueRejectedError as exc:
-            self._error(
-                target.device_id, target.key, message.payload.decode(errors="replace"), str(exc)
-            )
-            return
-        expiry = self.mqtt.command_expiry
-        for key, value in items.items():
-            command = Command(target.device_id, key, value, now, now + expiry)
-            self._spawn(self._execute(command))
+        if target is not None:
+            self.dispatcher.handle(target, message)
 
-    def _spawn(self, work: Any) -> None:
+    def _spawn(self, work: Any, failed: Callable[[str], None] | None = None) -> None:
+        """Run a command's or request's work in the bridge's TaskGroup; whatever it raises
+        is logged (and reported through ``failed``), never taken for the bridge's end."""
         if self._group is None:
             raise RuntimeError("the bridge is not running")
-        self._group.create_task(work)
+        self._group.create_task(_guarded(work, failed))
 
-    async def _execute(self, command: Command) -> None:
-        """Run one command in arrival order for its device, or drop it with an error."""
-        poller = self.engine.devices.get(command.device_id)
-        if poller is None:
-            self._error(command.device_id, command.key, command.value, "no such device")
-            return
-        lock = self._locks.setdefault(command.device_id, asyncio.Lock())
-        async with lock:
-            left = command.expires - time.monotonic()
-            if left <= 0:
-                poller.writes.expired += 1
-                self._error(
-                    command.device_id,
-                    command.key,
-                    command.value,
-                    "expired: not executed within the command expiry",
-                )
-                return
-            if poller.health.online is False:
-                poller.writes.rejected += 1
-                self._error(
-                    command.device_id,
-                    command.key,
-                    command.value,
-                    f"{command.device_id} is offline: nothing written",
-                )
-                return
-            try:
-                await poller.write(command.key, command.value, deadline=command.expires)
-            except BridgeError as exc:
-                self._error(command.device_id, command.key, command.value, str(exc))
-
-    async def _read_now(self, device_id: str, keys: list[str] | None) -> None:
-        poller = self.engine.devices.get(device_id)
-        if poller is None:
-            self._error(device_id, None, keys, "no such device")
-            return
-        unknown = [k for k in keys or [] if k not in poller.points]
-        if unknown:
-            self._error(device_id, None, keys, f"no such entities: {', '.join(unknown)}")
-            return
-        await poller.read_now(keys)
+    def _read_done(self, device_id: str) -> None:
+        """A read on request finished: publish the device's state (changed or not)."""
         self._dirty.setdefault(device_id, set())
         self._wake.set()
 
     # --- management -------------------------------------------------------------------
+
+    def _request(self, command: str, message: Message) -> None:
+        """Start one management request, or answer at once why not."""
+        try:
+            if message.retain:
+                raise ValueRejectedError(RETAINED)
+            check_size(message.payload)
+            if self._requests >= MAX_REQUESTS:
+                raise ValueRejectedError(f"busy: {self._requests} requests are running")
+        except ValueRejectedError as exc:
+            self.dispatcher.counters.refused += 1
+            self._respond(command, response(error=str(exc)))
+            return
+        self._requests += 1
+        self._spawn(self._answer(command, message.payload))
 
     async def _answer(self, command: str, payload: bytes) -> None:
         """Run one management request and queue its response."""
         try:
             answer = await self.management.handle(command, payload)
         except Exception as exc:  # a request must never stop the bridge
-            log.exception("management request %s failed", command)
+            log.exception("management request %s failed", command[:200])
             answer = response(error=f"internal error: {exc}")
-        topic = self.topics.bridge_response(command)
-        self._outbox.append(Publish(topic, answer, retain=False))
+        finally:
+            self._requests -= 1
+        self._respond(command, answer)
+
+    def _respond(self, command: str, answer: str) -> None:
+        self._queue(Publish(self.topics.bridge_response(command), answer, retain=False))
+
+    def _queue(self, message: Publish) -> None:
+        """Queue a non-retained message; when the outbox is full the oldest is dropped
+        (and counted)."""
+        if len(self._outbox) == self._outbox.maxlen:
+            self.dropped += 1
+        self._outbox.append(message)
         self._wake.set()
 
     async def _reloaded(self, device_ids: list[str]) -> None:
@@ -303,10 +306,18 @@ class Bridge:
         await client.publish(self.topics.bridge_info, info, retain=True)
 
     def _error(self, device_id: str, key: str | None, value: object, error: str) -> None:
-        log.info("%s %s=%r refused: %s", device_id, key, value, error)
-        payload = json.dumps({"key": key, "value": value, "error": error}, default=str)
-        self._outbox.append(Publish(self.topics.error(device_id), payload, retain=False))
-        self._wake.set()
+        payload = error_document(key, value, error)
+        log.info("%s refused: %s", device_id[:100], payload)
+        self._queue(Publish(self.topics.error(device_id), payload, retain=False))
+
+
+async def _guarded(work: Any, failed: Callable[[str], None] | None) -> None:
+    try:
+        await work
+    except Exception as exc:  # one command or request must never stop the bridge
+        log.exception("internal error while handling a command or request")
+        if failed is not None:
+            failed(f"internal error: {type(exc).__name__}")
 
 
 def _availability_word(online: bool | None) -> str:

@@ -58,7 +58,9 @@ async def observing(broker: Broker, *filters: str) -> AsyncIterator[Observer]:
             await cancel(task)
 
 
-def bridge_config(broker: Broker, port: int, **mqtt: Any) -> Any:
+def bridge_config(
+    broker: Broker, port: int, bridge: dict[str, Any] | None = None, **mqtt: Any
+) -> Any:
     devices = [
         {
             "id": name,
@@ -73,6 +75,7 @@ def bridge_config(broker: Broker, port: int, **mqtt: Any) -> Any:
     ]
     data = {
         "mqtt": {"url": broker.url, "base_topic": "modbus", "command_expiry": 3} | mqtt,
+        "bridge": bridge or {},
         "buses": [
             {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port, "timeout": 0.5}
         ],
