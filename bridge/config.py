@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
-from urllib.parse import urlsplit
+from urllib.parse import unquote, urlsplit
 
 from pydantic import (
     BaseModel,
@@ -35,6 +35,9 @@ from bridge.errors import ConfigError, MappingError
 
 _ID = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _TOPIC_FORBIDDEN = re.compile(r"[#+\x00]")
+MAX_TOPIC_BYTES = 65535  # MQTT's limit on a topic name
+MAX_PREFIX_BYTES = 1024  # base_topic, discovery_prefix: room left for device, entity, suffix
+_LONGEST_COMPONENT = "binary_sensor"
 
 
 class _Strict(BaseModel):
@@ -64,10 +67,39 @@ class MqttConfig(_Strict):
     password_env: str | None = None
     tls: TlsConfig | None = None
     version: Literal["5", "3.1.1"] = Field("5", description="MQTT 5, falls back to 3.1.1")
-    keepalive: Duration = 60.0
+    keepalive: Duration = Field(60.0, ge=1, le=65535, description="MQTT keepalive, 1..65535 s")
     qos: Literal[0, 1, 2] = 1
-    state_refresh: Duration = Field(300.0, description="republish every value this often")
-    command_expiry: Duration = Field(5.0, description="drop commands not executed in time")
+    state_refresh: Duration = Field(300.0, gt=0, description="republish every value this often")
+    command_expiry: Duration = Field(5.0, gt=0, description="drop commands not executed in time")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _credentials_from_url(cls, data: Any) -> Any:
+        """``mqtt://user:pass@host`` logs in as user with pass; the URL keeps only the
+        host, so no log line, error or ``bridge/info`` ever shows the password."""
+        url = data.get("url") if isinstance(data, dict) else None
+        if not isinstance(url, str) or "@" not in url:
+            return data
+        try:
+            parts = urlsplit(url)
+            user, password, port = parts.username, parts.password, parts.port
+        except ValueError:
+            return data  # _check_url names the problem
+        if user is None:
+            return data
+        if data.get("username") is not None or (
+            password is not None
+            and any(data.get(k) is not None for k in ("password", "password_file", "password_env"))
+        ):
+            raise ValueError(
+                "url: give the user and password in the URL or in their fields, not both"
+            )
+        host = parts.hostname or ""
+        netloc = (f"[{host}]" if ":" in host else host) + (f":{port}" if port else "")
+        moved = {**data, "url": parts._replace(netloc=netloc).geturl(), "username": unquote(user)}
+        if password is not None:
+            moved["password"] = unquote(password)
+        return moved
 
     @field_validator("url")
     @classmethod
@@ -84,7 +116,21 @@ class MqttConfig(_Strict):
             raise ValueError("a topic prefix is non-empty and has no leading or trailing '/'")
         if _TOPIC_FORBIDDEN.search(topic):
             raise ValueError("a topic prefix cannot contain '#', '+' or NUL")
+        if topic.startswith("$"):
+            raise ValueError("topics starting with '$' belong to the broker ($SYS); drop the '$'")
+        if len(topic.encode("utf-8")) > MAX_PREFIX_BYTES:
+            raise ValueError(f"a topic prefix is at most {MAX_PREFIX_BYTES} bytes")
         return topic
+
+    @model_validator(mode="after")
+    def _prefixes_apart(self) -> Self:
+        base, prefix = self.base_topic, self.discovery_prefix
+        if base == prefix or base.startswith(prefix + "/") or prefix.startswith(base + "/"):
+            raise ValueError(
+                "discovery_prefix and base_topic must not be equal or nested: the bridge's "
+                "commands and Home Assistant's discovery would share topics"
+            )
+        return self
 
     @model_validator(mode="after")
     def _tls_needs_mqtts(self) -> Self:
@@ -121,7 +167,7 @@ class MqttConfig(_Strict):
 
 class _BusBase(_Strict):
     id: str
-    timeout: Duration = Field(1.0, description="seconds to wait for a reply")
+    timeout: Duration = Field(1.0, gt=0, le=60, description="seconds to wait for a reply")
     retries: int = Field(
         1, ge=0, le=5, description="resends of a write after a timeout (reads: next poll)"
     )
@@ -204,7 +250,18 @@ class ManagementConfig(_Strict):
     allow_raw_writes: bool = Field(
         False, description="permit bridge/request/device/write (raw register writes)"
     )
-    scan_timeout: Duration = Field(0.2, description="per-unit answer timeout of device/scan")
+    scan_timeout: Duration = Field(
+        0.2, gt=0, le=5, description="per-unit answer timeout of device/scan"
+    )
+    mapping_switch: bool = Field(
+        False,
+        description="permit bridge/request/mapping/reload to switch a device to another "
+        "mapping: a shipped name, or a file under mapping_dirs",
+    )
+    mapping_dirs: list[Path] = Field(
+        default_factory=list,
+        description="folders (relative to the config file) whose mapping files a switch may name",
+    )
     metrics: MetricsConfig = MetricsConfig()
 
 
@@ -283,6 +340,8 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
         raise ConfigError(str(path), _with_ids(format_validation_errors(exc), data)) from None
     mappings, errors = _load_mappings(config, path.parent)
     errors += _secret_errors(config.mqtt)
+    errors += _topic_errors(config, mappings)
+    errors += _folder_errors(config.bridge, path.parent)
     if errors:
         raise ConfigError(str(path), errors)
     return LoadedConfig(path=path, config=config, mappings=mappings)
@@ -328,6 +387,37 @@ def load_device_mapping(
     if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
         errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
     return mapping, errors
+
+
+def _topic_errors(config: Config, mappings: dict[str, Mapping]) -> list[str]:
+    """Devices whose longest topic (a discovery config or a command) would exceed MQTT's
+    limit, so that the broker would refuse it at run time."""
+    mqtt, errors = config.mqtt, []
+    for device in config.devices:
+        mapping = mappings.get(device.id)
+        if mapping is None:
+            continue
+        key = max(mapping.entities, key=len, default="")
+        longest = max(
+            f"{mqtt.base_topic}/{device.id}/{key}/set",
+            f"{mqtt.discovery_prefix}/{_LONGEST_COMPONENT}/{device.id}/{key}/config",
+            key=lambda topic: len(topic.encode("utf-8")),
+        )
+        size = len(longest.encode("utf-8"))
+        if size > MAX_TOPIC_BYTES:
+            errors.append(
+                f"devices.{device.id}.id: its topics would be {size} bytes, over MQTT's "
+                f"{MAX_TOPIC_BYTES}; shorten the id or the mapping's keys"
+            )
+    return errors
+
+
+def _folder_errors(bridge: ManagementConfig, base: Path) -> list[str]:
+    return [
+        f"bridge.mapping_dirs: no such folder {str(folder)!r}"
+        for folder in bridge.mapping_dirs
+        if not (base / folder).is_dir()
+    ]
 
 
 def _secret_errors(mqtt: MqttConfig) -> list[str]:

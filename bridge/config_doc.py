@@ -35,7 +35,8 @@ NOTES: dict[str, str] = {
     "Config.bridge": "the management side: health reports, raw writes, scans, metrics",
     "Config.buses": "the serial lines and TCP gateways the bridge owns",
     "Config.devices": "the Modbus devices, each on one bus with one mapping",
-    "MqttConfig.url": "broker: `mqtt://host[:port]` or `mqtts://host[:port]` (TLS)",
+    "MqttConfig.url": "broker: `mqtt://[user[:password]@]host[:port]` or `mqtts://...` (TLS); "
+    "a user and password in the URL log in and are never shown",
     "MqttConfig.base_topic": "first level of every topic: `<base>/<device>/...`",
     "MqttConfig.discovery_prefix": "Home Assistant's discovery prefix",
     "MqttConfig.client_id": "MQTT client id (default: generated)",

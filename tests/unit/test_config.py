@@ -160,6 +160,18 @@ def test_disabled_device_may_share_a_unit(tmp_path: Path) -> None:
         ("{password: a, password_env: B}", "mqtt: give one of password"),
         ("{password_file: /nonexistent/pw}", "mqtt.password_file: no such file"),
         ("{qos: 3}", "mqtt.qos: Input should be 0, 1 or 2"),
+        # what run cannot do, refused by check (issue 11 item 13)
+        ("{base_topic: $SYS/modbus}", "mqtt.base_topic: topics starting with '$'"),
+        ("{discovery_prefix: $ha}", "mqtt.discovery_prefix: topics starting with '$'"),
+        (f"{{base_topic: {'m' * 1025}}}", "mqtt.base_topic: a topic prefix is at most 1024"),
+        ("{keepalive: 65536}", "mqtt.keepalive: Input should be less than or equal to 65535"),
+        ("{keepalive: 0}", "mqtt.keepalive: Input should be greater than or equal to 1"),
+        ("{state_refresh: 0}", "mqtt.state_refresh: Input should be greater than 0"),
+        ("{command_expiry: 0s}", "mqtt.command_expiry: Input should be greater than 0"),
+        ("{base_topic: ha, discovery_prefix: ha}", "mqtt: discovery_prefix and base_topic"),
+        ("{base_topic: ha/modbus, discovery_prefix: ha}", "mqtt: discovery_prefix and base"),
+        ("{url: 'mqtt://u:p@h', username: v}", "mqtt: url: give the user and password"),
+        ("{url: 'mqtt://u:p@h', password_env: PW}", "mqtt: url: give the user and password"),
     ],
 )
 def test_mqtt_errors(tmp_path: Path, mqtt: str, expected: str) -> None:
@@ -188,3 +200,36 @@ def test_not_a_config(tmp_path: Path, text: str, message: str) -> None:
 def test_unreadable_file(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="cannot read"):
         load_config(tmp_path / "missing.yaml")
+
+
+def test_credentials_in_the_url_log_in_and_are_never_shown(tmp_path: Path) -> None:
+    text = "mqtt: {url: 'mqtt://bridge%40site:s3cr%3At@broker.example:1884'}\n" + BASE
+    mqtt = load_config(write(tmp_path, text)).config.mqtt
+    assert (mqtt.username, mqtt.password_value()) == ("bridge@site", "s3cr:t")
+    assert (mqtt.url, mqtt.host, mqtt.port) == (
+        "mqtt://broker.example:1884",
+        "broker.example",
+        1884,
+    )
+    dumped = str(mqtt.model_dump(mode="json")) + repr(mqtt)
+    assert "s3cr" not in dumped
+    user_only = load_config(write(tmp_path, text.replace(":s3cr%3At", ""))).config.mqtt
+    assert (user_only.username, user_only.password_value()) == ("bridge@site", None)
+
+
+def test_topics_beyond_the_mqtt_limit_are_refused(tmp_path: Path) -> None:
+    long_id = "d" * 65500  # homeassistant/binary_sensor/<id>/speed/config: 65541 bytes
+    rows = issues(
+        tmp_path, BASE + f"  - {{id: {long_id}, bus: rs485, unit: 2, mapping: t1.yaml}}\n"
+    )
+    assert rows == (
+        f"devices.{long_id}.id: its topics would be 65541 bytes, over MQTT's 65535; "
+        "shorten the id or the mapping's keys",
+    )
+
+
+def test_mapping_dirs_must_exist(tmp_path: Path) -> None:
+    text = "bridge: {mapping_switch: true, mapping_dirs: [maps]}\n" + BASE
+    assert issues(tmp_path, text) == ("bridge.mapping_dirs: no such folder 'maps'",)
+    (tmp_path / "maps").mkdir()
+    assert load_config(write(tmp_path, text)).config.bridge.mapping_dirs == [Path("maps")]
