@@ -6,17 +6,36 @@ unless the request is valid. Raw reads, writes and scans go through the bus's ow
 scheduler, so they never collide with polling: reads and writes queue ahead of polls,
 scan probes queue with them (a scan of a busy bus does not stop its devices' polling).
 ``info()`` is the retained ``<base>/bridge/info`` document.
+
+Limits, checked before anything is queued: one scan per bus at a time and ``MAX_RAW``
+raw reads or writes waiting per bus (more are answered "busy"); unit 0 (broadcast) is
+never addressed, serial lines only 1..247. Registers a device's mapping guards stay
+guarded for raw access too: a raw write to a dangerous register needs the device's
+``allow_dangerous_writes``, a raw read of a secret or write-only one
+``bridge.allow_raw_writes``. A mapping switch (``mapping/reload`` with ``mapping``) needs
+``bridge.mapping_switch`` and takes only shipped names or files under
+``bridge.mapping_dirs``; a refused path is answered without a word about the file.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable
+import functools
+from collections import Counter
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
 from typing import Any
 
 from bridge import __version__
-from bridge.config import DeviceConfig, LoadedConfig, config_schema, load_device_mapping
+from bridge.config import (
+    DeviceConfig,
+    LoadedConfig,
+    SerialBus,
+    config_schema,
+    load_device_mapping,
+)
 from bridge.core.management_request import (
+    MAX_UNIT,
     REQUESTS,
     DeviceRead,
     DeviceScan,
@@ -45,9 +64,12 @@ from bridge.modbus.commission import (
     scheduler_submit,
 )
 from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import BusScheduler, Priority
 
 Reloaded = Callable[[list[str]], Awaitable[None]]
+MAX_RAW = 2  # raw reads and writes waiting per bus; more are answered "busy"
+REFUSED_MAPPING = "mapping: not a shipped mapping name, nor a .yaml file under bridge.mapping_dirs"
 
 
 class Management:
@@ -67,6 +89,8 @@ class Management:
         self._on_reload = on_reload
         self._mqtt_state = mqtt_state
         self._reloading = asyncio.Lock()
+        self._scanning: set[str] = set()  # buses with a scan running
+        self._raw: Counter[str] = Counter()  # raw requests waiting or running, per bus
 
     async def handle(self, command: str, payload: bytes) -> str:
         """The response JSON for one request (never raises for a bad request)."""
@@ -110,7 +134,28 @@ class Management:
         else:
             scheduler, unit = self._bus(request.bus), request.unit or 0  # validated: given
         bus = scheduler.transport.bus
+        if isinstance(bus, SerialBus) and unit > MAX_UNIT:
+            raise RequestError(f"unit: serial lines address units 1..{MAX_UNIT}")
         return scheduler, unit, request.timeout or bus.timeout
+
+    def _device_at(self, scheduler: BusScheduler, unit: int) -> DevicePoller | None:
+        """The configured device answering as ``unit`` on that bus, if any."""
+        for poller in self.engine.devices.values():
+            if poller.scheduler is scheduler and poller.device.unit == unit:
+                return poller
+        return None
+
+    @asynccontextmanager
+    async def _raw_slot(self, scheduler: BusScheduler) -> AsyncIterator[None]:
+        """One of the ``MAX_RAW`` places for raw requests on a bus, or "busy"."""
+        bus_id = scheduler.bus_id
+        if self._raw[bus_id] >= MAX_RAW:
+            raise RequestError(f"busy: {self._raw[bus_id]} raw requests wait for bus {bus_id}")
+        self._raw[bus_id] += 1
+        try:
+            yield
+        finally:
+            self._raw[bus_id] -= 1
 
     def _bus(self, bus_id: str | None) -> BusScheduler:
         schedulers = self.engine.schedulers
@@ -125,7 +170,16 @@ class Management:
     async def _read(self, request: DeviceRead) -> dict[str, Any]:
         scheduler, unit, timeout = self._target(request)
         read = raw_read(request.table, request.address, request.count)
-        reading = await read_interpreted(scheduler_submit(scheduler), unit, read, timeout)
+        device = self._device_at(scheduler, unit)
+        hidden = device.guard.hidden_in(read.table, read.address, read.count) if device else []
+        if hidden and not self.settings.allow_raw_writes:
+            raise RequestError(
+                f"{device.device.id if device else unit}: addresses {_listed(hidden)} hold "
+                "secret or write-only values; raw reads of them need "
+                "bridge.allow_raw_writes: true"
+            )
+        async with self._raw_slot(scheduler):
+            reading = await read_interpreted(scheduler_submit(scheduler), unit, read, timeout)
         return {"bus": scheduler.bus_id, **reading}
 
     async def _write(self, request: DeviceWrite) -> dict[str, Any]:
@@ -135,7 +189,16 @@ class Management:
             )
         scheduler, unit, timeout = self._target(request)
         write = raw_write(request.table, request.address, request.values)
-        await scheduler_submit(scheduler, Priority.WRITE)(unit, write, timeout)
+        device = self._device_at(scheduler, unit)
+        if device is not None and not device.device.allow_dangerous_writes:
+            guarded = device.guard.dangerous_in(write.table, write.address, len(write.values))
+            if guarded:
+                raise RequestError(
+                    f"{device.device.id}: addresses {_listed(guarded)} are guarded "
+                    "(dangerous); set allow_dangerous_writes: true for the device to permit it"
+                )
+        async with self._raw_slot(scheduler):
+            await scheduler_submit(scheduler, Priority.WRITE)(unit, write, timeout)
         return {
             "bus": scheduler.bus_id,
             "unit": unit,
@@ -154,7 +217,13 @@ class Management:
             for device_id, p in self.engine.devices.items()
             if p.scheduler is scheduler
         }
-        found = await scan(scheduler_submit(scheduler, Priority.POLL), units, timeout)
+        if scheduler.bus_id in self._scanning:
+            raise RequestError(f"busy: a scan of bus {scheduler.bus_id} is running")
+        self._scanning.add(scheduler.bus_id)
+        try:
+            found = await scan(scheduler_submit(scheduler, Priority.POLL), units, timeout)
+        finally:
+            self._scanning.discard(scheduler.bus_id)
         return {
             "bus": scheduler.bus_id,
             "probed": len(units),
@@ -183,10 +252,11 @@ class Management:
         if request.mapping is not None:  # one device switches to another mapping
             (device_id,) = wanted
             settings[device_id] = settings[device_id].model_copy(
-                update={"mapping": request.mapping}
+                update={"mapping": self._switch_to(request.mapping)}
             )
         async with self._reloading:
-            fresh = self._load_mappings(settings)  # all or nothing: errors change nothing
+            # all or nothing: errors change nothing; files are read off the event loop
+            fresh = await asyncio.to_thread(self._load_mappings, settings)
             changed = [
                 d
                 for d in wanted
@@ -198,6 +268,26 @@ class Management:
             if changed:
                 await self._on_reload(changed)
         return {"reloaded": wanted, "changed": changed}
+
+    def _switch_to(self, mapping: str) -> str:
+        """The mapping a switch may load: a shipped name, or the resolved path of a .yaml
+        file under ``bridge.mapping_dirs`` (symbolic links followed); else one answer that
+        says nothing about the file."""
+        if not self.settings.mapping_switch:
+            raise RequestError(
+                "mapping switches are off: set bridge.mapping_switch: true in the config"
+            )
+        if mapping in builtin_mapping_names():
+            return mapping
+        base = self.loaded.path.parent
+        try:
+            path = (base / mapping).resolve()
+            folders = [(base / folder).resolve() for folder in self.settings.mapping_dirs]
+        except (OSError, ValueError):  # a NUL byte, a symlink loop
+            raise RequestError(REFUSED_MAPPING) from None
+        if path.suffix in (".yaml", ".yml") and any(path.is_relative_to(f) for f in folders):
+            return str(path)
+        raise RequestError(REFUSED_MAPPING)
 
     def _load_mappings(self, settings: dict[str, DeviceConfig]) -> dict[str, Mapping]:
         """The mapping of each device read again, checked as ``check`` checks a config."""
@@ -249,6 +339,16 @@ class Management:
             "mappings": {"shipped": builtin_mapping_names(), "in_use": in_use},
             "requests": sorted(REQUESTS),
             "raw_writes": self.settings.allow_raw_writes,
-            "config_schema": config_schema(),
-            "mapping_schema": mapping_schema(),
+            **_schemas(),
         }
+
+
+@functools.cache
+def _schemas() -> dict[str, Any]:
+    """The config and mapping JSON schemas (built once: about 12 ms each)."""
+    return {"config_schema": config_schema(), "mapping_schema": mapping_schema()}
+
+
+def _listed(addresses: list[int]) -> str:
+    shown = ", ".join(str(a) for a in addresses[:8])
+    return shown + (f" and {len(addresses) - 8} more" if len(addresses) > 8 else "")

@@ -18,7 +18,14 @@ import json
 import re
 from typing import Any, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from bridge.core.duration import Duration
 from bridge.core.mapping import format_validation_errors
@@ -26,6 +33,8 @@ from bridge.errors import BridgeError
 
 Transaction = str | int | None
 MAX_SCAN_TIMEOUT = 5.0
+MAX_UNIT = 247  # unit ids a bus addresses; 0 is broadcast (nobody answers), 248-255 reserved
+MAX_TCP_UNIT = 255  # a Modbus TCP gateway may answer as 255
 _UNITS = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+))?\s*$")
 
 
@@ -44,12 +53,20 @@ class Request(BaseModel):
 
 
 class Target(Request):
-    """One unit: a configured ``device``, or ``unit`` on ``bus`` (the only bus if omitted)."""
+    """One unit: a configured ``device``, or ``unit`` on ``bus`` (the only bus if omitted).
+    Unit 0 is broadcast: nobody answers it, so it is never read or written."""
 
     device: str | None = None
     bus: str | None = None
-    unit: int | None = Field(None, ge=0, le=255)
+    unit: int | None = Field(None, ge=0, le=MAX_TCP_UNIT)
     timeout: Duration | None = Field(None, le=MAX_SCAN_TIMEOUT)
+
+    @field_validator("unit")
+    @classmethod
+    def _not_broadcast(cls, unit: int | None) -> int | None:
+        if unit == 0:
+            raise ValueError(f"0 is broadcast (nobody answers it): give a unit 1..{MAX_UNIT}")
+        return unit
 
     @model_validator(mode="after")
     def _device_or_unit(self) -> Self:
@@ -89,10 +106,11 @@ class DeviceScan(Request):
 
 class MappingReload(Request):
     """Read the mapping files again (all devices, or those listed) and apply them; with
-    ``mapping`` (a shipped name or a file), one listed device switches to that mapping."""
+    ``mapping`` (a shipped name or a file under ``bridge.mapping_dirs``; needs
+    ``bridge.mapping_switch``), one listed device switches to that mapping."""
 
-    devices: list[str] | None = None
-    mapping: str | None = Field(None, min_length=1)
+    devices: list[str] | None = Field(None, max_length=1000)
+    mapping: str | None = Field(None, min_length=1, max_length=1024)
 
     @model_validator(mode="after")
     def _one_device_for_a_new_mapping(self) -> Self:
@@ -136,20 +154,24 @@ def parse_request(command: str, payload: bytes) -> Request:
 
 
 def parse_units(spec: str | list[int]) -> list[int]:
-    """``"1-10,20"`` or ``[1, 2]`` -> sorted unique unit ids in 1..247; ValueError if not."""
+    """``"1-10,20"`` or ``[1, 2]`` -> sorted unique unit ids in 1..247; RequestError if not.
+    Every bound is checked before a range is expanded (``"1-100000000"`` costs nothing)."""
+    bounds: list[tuple[int, int]] = []
     if isinstance(spec, list):
-        units = set(spec)
+        bounds = [(unit, unit) for unit in spec]
     else:
-        units = set()
         for part in spec.split(","):
             match = _UNITS.match(part)
             if match is None:
-                raise RequestError(f"units: {part.strip()!r} is not a unit or a range like 1-247")
-            first, last = int(match.group(1)), int(match.group(2) or match.group(1))
-            units.update(range(first, last + 1))
-    if not units or min(units) < 1 or max(units) > 247:
-        raise RequestError("units: unit ids are 1..247")
-    return sorted(units)
+                shown = part.strip()[:20]
+                raise RequestError(f"units: {shown!r} is not a unit or a range like 1-247")
+            first, last = match.group(1), match.group(2) or match.group(1)
+            if max(len(first), len(last)) > 3:  # int() of a long digit string is slow
+                raise RequestError(f"units: unit ids are 1..{MAX_UNIT}")
+            bounds.append((int(first), int(last)))
+    if not bounds or any(not 1 <= a <= b <= MAX_UNIT for a, b in bounds):
+        raise RequestError(f"units: unit ids are 1..{MAX_UNIT}, ranges low-high")
+    return sorted({unit for first, last in bounds for unit in range(first, last + 1)})
 
 
 def response(

@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterable
 
 from bridge.config import DeviceConfig, LoadedConfig, SerialBus, TcpBus
 from bridge.core.codec import Value
+from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.health import HealthPolicy
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, WriteSnapshot
 from bridge.core.mapping import Mapping
@@ -72,7 +73,9 @@ class Engine:
             if device.enabled:
                 self.devices[device.id] = self._poller(device, loaded.mappings[device.id])
 
-    def _poller(self, device: DeviceConfig, mapping: Mapping) -> DevicePoller:
+    def _poller(
+        self, device: DeviceConfig, mapping: Mapping, guard: Guard = UNGUARDED
+    ) -> DevicePoller:
         bus = self._buses[device.bus]
         return DevicePoller(
             device,
@@ -83,6 +86,7 @@ class Engine:
             retries=bus.retries,
             on_update=self._on_update,
             policy=self._policy,
+            guard=guard,
         )
 
     async def run(self) -> None:
@@ -106,7 +110,7 @@ class Engine:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
-        poller = self._poller(device or old.device, mapping)
+        poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         self.devices[device_id] = poller
         if self._group is not None:
             self._tasks[device_id] = self._group.create_task(

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from bridge.config import DeviceConfig
 from bridge.core.codec import Value, decode
 from bridge.core.entity import PollClass, Table
+from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.health import DeviceHealth, HealthPolicy, Outcome, Transition
 from bridge.core.mapping import Mapping, Point
 from bridge.core.planner import ReadLimits, addresses_of, limits_for, plan_reads
@@ -68,11 +69,13 @@ class DevicePoller:
         retries: int = 1,
         on_update: Callable[[DeviceUpdate], None] | None = None,
         policy: HealthPolicy = DEFAULT_POLICY,
+        guard: Guard = UNGUARDED,
     ) -> None:
         self.device = device
         self.mapping = _with_overrides(mapping, device)
         self.protocol: Protocol = self.mapping.protocol
         self.points: dict[str, Point] = self.mapping.points(device.options)
+        self.guard = guard | Guard.of(self.points.values())  # ``guard``: earlier mappings'
         self.scheduler = scheduler
         self.timing = timing
         self.timeout = device.protocol.response_timeout or timeout

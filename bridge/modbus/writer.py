@@ -146,6 +146,7 @@ class DeviceWriter:
             entity = point.entity
             try:
                 writes = encode(point, items[point.key], after)
+                self._check_unguarded(point, writes)
                 if entity.eeprom and entity.readable and _unchanged(point, writes, after):
                     self.counters.skipped_unchanged += 1  # no wear, no refusal
                     continue
@@ -210,10 +211,22 @@ class DeviceWriter:
         if not entity.writable:
             raise ValueRejectedError(f"{point.key} is read-only")
         if entity.dangerous and not self.poller.device.allow_dangerous_writes:
-            raise ValueRejectedError(
-                f"{point.key} is a guarded write (dangerous); set allow_dangerous_writes: true "
-                f"for device {self.poller.device.id} to permit it"
-            )
+            raise self._guarded(point.key)
+
+    def _check_unguarded(self, point: Point, writes: tuple[Write, ...]) -> None:
+        """No frame of the command touches a register guarded by this mapping or by one
+        the device had before (the guard survives mapping reloads)."""
+        if self.poller.device.allow_dangerous_writes:
+            return
+        guard = self.poller.guard
+        if any(guard.dangerous_in(w.table, w.address, len(w.values)) for w in writes):
+            raise self._guarded(point.key)
+
+    def _guarded(self, key: str) -> ValueRejectedError:
+        return ValueRejectedError(
+            f"{key} is a guarded write (dangerous); set allow_dangerous_writes: true "
+            f"for device {self.poller.device.id} to permit it"
+        )
 
     def _check_eeprom_rate(self, point: Point) -> None:
         """An EEPROM parameter is rewritten at most once per ``eeprom_write_interval``."""

@@ -34,15 +34,21 @@ _transactions = itertools.count(1)
 
 @contextlib.asynccontextmanager
 async def site(
-    broker: Broker, folder: Path, *, raw_writes: bool = False, **mqtt: Any
+    broker: Broker,
+    folder: Path,
+    *,
+    raw_writes: bool = False,
+    bridge: dict[str, Any] | None = None,
+    **mqtt: Any,
 ) -> AsyncIterator[tuple[Bridge, Simulator]]:
-    """The Nastec pump (mapping file in ``folder``) on unit 1, a soft starter on unit 3."""
+    """The Nastec pump (mapping file in ``folder``) on unit 1, a soft starter on unit 3;
+    ``bridge``: more settings of the config's bridge section."""
     shutil.copy(builtin_mapping_path("nastec_vasco"), folder / "pump.yaml")
     sim = simulator((1, "nastec_vasco"), (3, "soft_starter"), tick=0)
     async with serving_tcp(sim) as port:
         data = {
             "mqtt": {"url": broker.url} | mqtt,
-            "bridge": {"allow_raw_writes": raw_writes, "scan_timeout": 0.1},
+            "bridge": {"allow_raw_writes": raw_writes, "scan_timeout": 0.1} | (bridge or {}),
             "buses": [
                 {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port}
                 | {"timeout": 0.3}
@@ -52,10 +58,10 @@ async def site(
                 {"id": "starter", "bus": "tcp", "unit": 3, "mapping": "soft_starter"},
             ],
         }
-        bridge = Bridge(load_config_data(data, folder / "config.yaml"))
-        task = asyncio.create_task(bridge.run())
+        running = Bridge(load_config_data(data, folder / "config.yaml"))
+        task = asyncio.create_task(running.run())
         try:
-            yield bridge, sim
+            yield running, sim
         finally:
             await cancel(task)
 
@@ -275,7 +281,11 @@ async def test_mapping_reload_switches_a_device_to_a_new_mapping(
     (tmp_path / "starter.yaml").write_text(
         written.replace("name: Fault reset\n", "name: Reset the fault\n", 1)
     )
-    async with site(mosquitto, tmp_path) as (bridge, _), client_of(mosquitto) as tester:
+    switches = {"mapping_switch": True, "mapping_dirs": ["."]}
+    async with (
+        site(mosquitto, tmp_path, bridge=switches) as (bridge, _),
+        client_of(mosquitto) as tester,
+    ):
         await online(bridge, tester)
         topic = "homeassistant/device/starter/config"
         await eventually(lambda: topic in tester.retained, 10)
@@ -296,10 +306,11 @@ async def test_mapping_reload_switches_a_device_to_a_new_mapping(
         assert switched["data"] == {"reloaded": ["starter"], "changed": ["starter"]}
         await eventually(lambda: tester.after(before, topic), 10)
         assert tester.json(topic)["cmps"]["fault_reset"]["name"] == "Reset the fault"
-        assert bridge.engine.devices["starter"].device.mapping == "starter.yaml"
+        in_use = str((tmp_path / "starter.yaml").resolve())  # the file checked, not a name
+        assert bridge.engine.devices["starter"].device.mapping == in_use
         await eventually(lambda: tester.after(before, "modbus/bridge/devices"), 10)
         listing = {d["id"]: d for d in tester.json("modbus/bridge/devices")}
-        assert listing["starter"]["mapping"] == "starter.yaml"
+        assert listing["starter"]["mapping"] == in_use
         await online(bridge)
 
 
