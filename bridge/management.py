@@ -191,7 +191,7 @@ class Management:
         write = raw_write(request.table, request.address, request.values)
         device = self._device_at(scheduler, unit)
         if device is not None and not device.device.allow_dangerous_writes:
-            guarded = device.guard.dangerous_in(write.table, write.address, len(write.values))
+            guarded = device.guard.dangerous_in(write.table, write.address, write.values)
             if guarded:
                 raise RequestError(
                     f"{device.device.id}: addresses {_listed(guarded)} are guarded "

@@ -2,8 +2,15 @@
 
 A ``Guard`` holds two sets of (table, wire address) cells:
 
-- ``dangerous``: written only when the device's config says ``allow_dangerous_writes``
-  (a factory reset, a breaker, a parameter that bricks the drive);
+- ``dangerous``: each cell with the bits of it that are guarded (0xFFFF for a whole
+  register, the field's bits for a bit field, 1 for a coil); written only when the
+  device's config says ``allow_dangerous_writes`` (a factory reset, a breaker, a
+  parameter that bricks the drive). A harmless bit field beside a guarded one in the same
+  word may be written read-modify-write: the guarded bits go back as they were read.
+- ``dangerous_words``: command registers that harmless entities write too, where only
+  some words are guarded: a dangerous button there guards the word it writes (the P2's
+  2000H takes "reverse run" 2 only with ``allow_dangerous_writes``, "stop" 6 always). A
+  register only dangerous entities write is guarded whole, whatever the word.
 - ``hidden``: secret or write-only entities (a password), read raw by
   ``bridge/request/device/read`` only when ``bridge.allow_raw_writes`` is on.
 
@@ -14,57 +21,109 @@ runtime cannot declare a guarded register harmless.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 
+from bridge.core.codec import COMMAND_PRESS, encode
 from bridge.core.entity import Table
 from bridge.core.mapping import Point
 
 Cell = tuple[Table, int]
+WHOLE = 0xFFFF
 
 
 @dataclass(frozen=True, slots=True)
 class Guard:
     """The guarded cells of one unit."""
 
-    dangerous: frozenset[Cell] = frozenset()
+    dangerous: Mapping[Cell, int] = field(default_factory=dict)  # cell -> guarded bits
     hidden: frozenset[Cell] = frozenset()
+    dangerous_words: Mapping[Cell, frozenset[int]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, points: Iterable[Point]) -> Guard:
-        """The cells a mapping's points mark dangerous (where they write) and secret or
-        write-only (where they read and write)."""
-        dangerous: set[Cell] = set()
+        """The cells a mapping's points mark dangerous (where they write, with their bits)
+        and secret or write-only (where they read and write)."""
+        points = list(points)
+        shared = {
+            cell
+            for p in points
+            if p.entity.writable and not p.entity.dangerous
+            for cell in _cells(p.table, p.write_address, p.count)
+        }
+        dangerous: dict[Cell, int] = {}
+        words: dict[Cell, frozenset[int]] = {}
         hidden: set[Cell] = set()
         for point in points:
             entity = point.entity
             written = _cells(point.table, point.write_address, point.count)
-            if entity.dangerous:
-                dangerous |= written
-                if point.sign is not None:
-                    dangerous |= _cells(point.sign.table, point.sign.write_address, 1)
+            if entity.dangerous and _is_command_word(point) and written <= shared:
+                for write in encode(point, COMMAND_PRESS, {}):
+                    cell = (write.table, write.address)
+                    words[cell] = words.get(cell, frozenset()) | set(write.values)
+            elif entity.dangerous:
+                for guarded in (point, point.sign):
+                    if guarded is not None:
+                        _add(dangerous, guarded)
             if entity.secret or not entity.readable:
                 hidden |= written | _cells(point.table, point.address, point.count)
-        return cls(frozenset(dangerous), frozenset(hidden))
+        return cls(dangerous, frozenset(hidden), words)
 
     def __or__(self, other: Guard) -> Guard:
-        return Guard(self.dangerous | other.dangerous, self.hidden | other.hidden)
+        dangerous = dict(self.dangerous)
+        for cell, bits in other.dangerous.items():
+            dangerous[cell] = dangerous.get(cell, 0) | bits
+        words = dict(self.dangerous_words)
+        for cell, values in other.dangerous_words.items():
+            words[cell] = words.get(cell, frozenset()) | values
+        return Guard(dangerous, self.hidden | other.hidden, words)
 
-    def dangerous_in(self, table: Table, address: int, count: int) -> list[int]:
-        """Guarded addresses a write of ``count`` cells from ``address`` would touch."""
-        return _within(self.dangerous, table, address, count)
+    def dangerous_in(self, table: Table, address: int, values: tuple[int, ...]) -> list[int]:
+        """Guarded addresses a raw write of ``values`` from ``address`` would touch: any
+        cell with guarded bits, whatever it holds, and a guarded word of a command
+        register."""
+        return self.dangerous_changed(table, address, values, {})
+
+    def dangerous_changed(
+        self, table: Table, address: int, values: tuple[int, ...], before: Mapping[Cell, int]
+    ) -> list[int]:
+        """Guarded addresses whose guarded bits a write of ``values`` from ``address``
+        would change, given what the unit holds (``before``, freshly read). A coil, or a
+        register whose content is not known, counts as changed."""
+        changed: list[int] = []
+        for offset, word in enumerate(values):
+            cell = (table, address + offset)
+            bits = self.dangerous.get(cell)
+            old = before.get(cell)
+            if word in self.dangerous_words.get(cell, ()) or (
+                bits is not None and (table.is_bits or old is None or (old ^ word) & bits)
+            ):
+                changed.append(cell[1])
+        return changed
 
     def hidden_in(self, table: Table, address: int, count: int) -> list[int]:
         """Secret or write-only addresses a read of ``count`` cells would return."""
-        return _within(self.hidden, table, address, count)
+        return sorted(a for t, a in self.hidden if t is table and address <= a < address + count)
 
 
 UNGUARDED = Guard()
 
 
+def _is_command_word(point: Point) -> bool:
+    """A button that writes a whole register (not a bit, not a coil)."""
+    entity = point.entity
+    return entity.press is not None and entity.bit is None and not point.table.is_bits
+
+
+def _add(dangerous: dict[Cell, int], point: Point) -> None:
+    entity = point.entity
+    width = entity.field_width
+    bits = WHOLE if width is None or entity.bit is None else ((1 << width) - 1) << entity.bit
+    if point.table.is_bits:
+        bits = 1
+    for cell in _cells(point.table, point.write_address, point.count):
+        dangerous[cell] = dangerous.get(cell, 0) | bits
+
+
 def _cells(table: Table, address: int, count: int) -> set[Cell]:
     return {(table, address + offset) for offset in range(count)}
-
-
-def _within(cells: frozenset[Cell], table: Table, address: int, count: int) -> list[int]:
-    return sorted(a for t, a in cells if t is table and address <= a < address + count)

@@ -146,7 +146,7 @@ class DeviceWriter:
             entity = point.entity
             try:
                 writes = encode(point, items[point.key], after)
-                self._check_unguarded(point, writes)
+                self._check_unguarded(point, writes, after)
                 if entity.eeprom and entity.readable and _unchanged(point, writes, after):
                     self.counters.skipped_unchanged += 1  # no wear, no refusal
                     continue
@@ -213,14 +213,21 @@ class DeviceWriter:
         if entity.dangerous and not self.poller.device.allow_dangerous_writes:
             raise self._guarded(point.key)
 
-    def _check_unguarded(self, point: Point, writes: tuple[Write, ...]) -> None:
-        """No frame of the command touches a register guarded by this mapping or by one
-        the device had before (the guard survives mapping reloads)."""
+    def _check_unguarded(
+        self, point: Point, writes: tuple[Write, ...], before: dict[Address, int]
+    ) -> None:
+        """No frame of the command changes a guarded bit of this mapping or of one the
+        device had before (the guard survives mapping reloads); ``before``: what the
+        device holds, fresh for a bit field's word. A harmless bit field beside a guarded
+        one writes the guarded bits back as they were read."""
         if self.poller.device.allow_dangerous_writes:
             return
         guard = self.poller.guard
-        if any(guard.dangerous_in(w.table, w.address, len(w.values)) for w in writes):
-            raise self._guarded(point.key)
+        image = dict(before)
+        for w in writes:
+            if guard.dangerous_changed(w.table, w.address, w.values, image):
+                raise self._guarded(point.key)
+            image |= _stored(w)
 
     def _guarded(self, key: str) -> ValueRejectedError:
         return ValueRejectedError(

@@ -203,6 +203,7 @@ def _writers(points: dict[str, Point]) -> list[Point]:
 @example(message=("modbus/vacon_nx/set", b'{"pd_in_1":' * 1200))  # deeper than json can go
 @example(message=("modbus/vacon_nx/pd_in_1/set", b"[" * 3000))
 @example(message=("modbus/nowhere/set", b'{"a": 1, "b": 2}'))
+@example(message=("modbus/vacon_nx/set", b'{"pd_in_5": 0.0, "pd_in_8": 0.0}'))
 async def test_random_set_messages_through_mosquitto(
     running: Running, message: tuple[str, bytes]
 ) -> None:

@@ -225,6 +225,37 @@ async def test_two_bit_fields_of_one_word_in_one_command(mosquitto: Broker) -> N
         assert [w.address for w in writes_to(sim, NASTEC)] == [SIGN_REGISTER]
 
 
+# --- 6. guarded words and bits, beside harmless ones --------------------------------------
+
+
+@pytest.mark.asyncio
+async def test_a_shared_command_word_takes_its_harmless_words_and_refuses_the_guarded(
+    mosquitto: Broker,
+) -> None:
+    """The P2's 2000H: stop (6) is written, reverse run (2) and reverse jog (4) are refused
+    without allow_dangerous_writes, also spelled as a raw register write."""
+    sim = all_units()
+    async with (
+        observing(mosquitto, "modbus/#") as observer,
+        bridged(mosquitto, sim, bridge={"allow_raw_writes": True}),
+    ):
+        await all_online(observer)
+        await observer.client.publish("modbus/p2_vfd/reverse_run/set", "PRESS")
+        await observer.client.publish("modbus/p2_vfd/set", '{"reverse_jog": "PRESS"}')
+        await eventually(lambda: len(errors(observer, "p2_vfd")) == 2)
+        assert all("guarded write" in e["error"] for e in errors(observer, "p2_vfd"))
+        raw = json.dumps({"device": "p2_vfd", "address": 0x2000, "values": [2]})
+        await observer.client.publish("modbus/bridge/request/device/write", raw)
+        await eventually(lambda: observer.after(0, "modbus/bridge/response/device/write"))
+        answer = json.loads(observer.after(0, "modbus/bridge/response/device/write")[0].payload)
+        assert answer["status"] == "error" and "guarded" in answer["error"]
+        await asyncio.sleep(0.3)
+        assert writes_to(sim, P2) == []
+        await observer.client.publish("modbus/p2_vfd/stop/set", "PRESS")
+        await eventually(lambda: writes_to(sim, P2))
+        assert [(w.address, w.values) for w in writes_to(sim, P2)] == [(0x2000, (6,))]
+
+
 # --- 4. expiry holds ---------------------------------------------------------------------
 
 

@@ -16,16 +16,17 @@ def points_of(name: str) -> list[Point]:
 def test_dangerous_cells_are_where_the_mapping_writes() -> None:
     guard = Guard.of(points_of("soft_starter"))
     assert (Table.HOLDING, FACTORY_RESET) in guard.dangerous
-    assert guard.dangerous_in(Table.HOLDING, FACTORY_RESET, 1) == [FACTORY_RESET]
+    assert guard.dangerous_in(Table.HOLDING, FACTORY_RESET, (0,)) == [FACTORY_RESET]
+    assert guard.dangerous_in(Table.HOLDING, FACTORY_RESET, (7,)) == [FACTORY_RESET]
     window = range(FACTORY_RESET - 3, FACTORY_RESET + 2)
     marked = {
         a for p in points_of("soft_starter") if p.entity.dangerous for a in p.span if a in window
     }
-    assert guard.dangerous_in(Table.HOLDING, window.start, len(window)) == sorted(marked)
-    assert guard.dangerous_in(Table.HOLDING, FACTORY_RESET + 1, 1) == []
-    assert guard.dangerous_in(Table.COIL, FACTORY_RESET, 1) == []  # another table
+    assert guard.dangerous_in(Table.HOLDING, window.start, (1,) * len(window)) == sorted(marked)
+    assert guard.dangerous_in(Table.HOLDING, FACTORY_RESET + 1, (0,)) == []
+    assert guard.dangerous_in(Table.COIL, FACTORY_RESET, (1,)) == []  # another table
     motor_run = next(p for p in points_of("soft_starter") if p.key == "motor_run")
-    assert not guard.dangerous_in(Table.HOLDING, motor_run.write_address, 1)
+    assert not guard.dangerous_in(Table.HOLDING, motor_run.write_address, (1,))
 
 
 def test_secret_and_write_only_cells_are_hidden() -> None:
@@ -49,3 +50,61 @@ def test_a_guard_only_grows() -> None:
     combined = shipped | Guard.of(harmless)
     assert combined.dangerous == shipped.dangerous
     assert UNGUARDED | shipped == shipped
+
+
+def test_a_harmless_bit_beside_a_guarded_one_may_be_written_with_the_guarded_bits_as_read() -> None:
+    points = points_of("nastec_vasco")
+    guard = Guard.of(points)
+    set_value = next(p for p in points if p.key == "set_value")
+    sign = set_value.sign
+    assert sign is not None and not set_value.entity.dangerous
+    cell = (sign.table, sign.write_address)
+    guarded = guard.dangerous.get(cell, 0)
+    assert guarded, "the sign's word holds guarded bits (the shipped mapping)"
+    sign_bit = 1 << (sign.entity.bit or 0)
+    assert not guarded & sign_bit
+    held = 0b1010_0000_0000_0101
+    flipped_sign = held ^ sign_bit
+    assert (
+        guard.dangerous_changed(sign.table, sign.write_address, (flipped_sign,), {cell: held}) == []
+    )
+    flipped_guarded = held ^ (guarded & -guarded)  # the lowest guarded bit
+    assert guard.dangerous_changed(
+        sign.table, sign.write_address, (flipped_guarded,), {cell: held}
+    ) == [sign.write_address]
+    # what the unit holds is unknown: any write to the word counts as a change
+    assert guard.dangerous_changed(sign.table, sign.write_address, (held,), {}) == [
+        sign.write_address
+    ]
+
+
+def test_coils_and_whole_registers_are_guarded_whatever_they_held() -> None:
+    points = points_of("soft_starter")
+    guard = Guard.of(points)
+    cell = (Table.HOLDING, FACTORY_RESET)
+    assert guard.dangerous[cell] == 0xFFFF
+    assert guard.dangerous_changed(Table.HOLDING, FACTORY_RESET, (0,), {cell: 0}) == []
+    assert guard.dangerous_changed(Table.HOLDING, FACTORY_RESET, (1,), {cell: 0}) == [FACTORY_RESET]
+    genset = Guard.of(points_of("smartgen_hgm6100"))
+    coils = [a for (t, a), bits in genset.dangerous.items() if t is Table.COIL]
+    assert coils and all(genset.dangerous[(Table.COIL, a)] == 1 for a in coils)
+    assert genset.dangerous_changed(Table.COIL, coils[0], (0,), {(Table.COIL, coils[0]): 0}) == [
+        coils[0]
+    ]
+
+
+def test_a_command_register_guards_only_the_words_of_its_dangerous_buttons() -> None:
+    points = points_of("p2_vfd")
+    guard = Guard.of(points)
+    command = next(p for p in points if p.key == "stop").write_address
+    cell = (Table.HOLDING, command)
+    assert cell not in guard.dangerous
+    assert guard.dangerous_words[cell] == frozenset({2, 4})  # reverse run, reverse jog
+    for word in (1, 3, 5, 6, 7):  # forward run and jog, stops, fault reset
+        assert guard.dangerous_changed(Table.HOLDING, command, (word,), {}) == []
+        assert guard.dangerous_in(Table.HOLDING, command, (word,)) == []
+    for word in (2, 4):
+        assert guard.dangerous_changed(Table.HOLDING, command, (word,), {cell: 6}) == [command]
+        assert guard.dangerous_in(Table.HOLDING, command, (word,)) == [command]
+    merged = Guard() | guard
+    assert merged.dangerous_words == guard.dangerous_words
