@@ -11,7 +11,8 @@ waits for a device or a broker round trip, and no exception from one message lea
 message loop. Home Assistant's ``online`` asks for one republish (however many arrive
 while it waits). At most ``MAX_REQUESTS`` management requests run at a time.
 Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
-optional metrics endpoint serves the same counters for the whole run.
+optional metrics endpoint serves the same counters for the whole run, and the optional
+web page (bridge/web) shows the same values, health and refusals, fed by ``feed``.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from bridge.metrics import serve_metrics
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
 from bridge.mqtt import Message, MqttClient, MqttError, MqttPublishError, run_with_reconnect
+from bridge.web import WebFeed, serve_web
 
 log = logging.getLogger(__name__)
 OUTBOX = 200  # non-retained messages kept while the broker is away
@@ -64,6 +66,7 @@ class Bridge:
         self._outbox: deque[Publish] = deque(maxlen=OUTBOX)
         self.dropped = 0  # messages the full outbox dropped (counted in bridge/health)
         self._availability: dict[str, str] = {}
+        self.feed = WebFeed()  # what the web page watches: value changes, refusals
         self.dispatcher = Dispatcher(
             self.engine,
             self.mqtt.command_expiry,
@@ -86,7 +89,8 @@ class Bridge:
     async def run(self) -> None:
         """Run until cancelled."""
         metrics = serve_metrics(self.loaded.config.bridge.metrics, self.engine.snapshot)
-        async with metrics, asyncio.TaskGroup() as group:
+        web = serve_web(self.loaded.config.bridge.web, self)
+        async with metrics, web, asyncio.TaskGroup() as group:
             self._group = group
             group.create_task(self.engine.run(), name="engine")
             group.create_task(
@@ -149,6 +153,7 @@ class Bridge:
     def _on_update(self, update: DeviceUpdate) -> None:
         self._dirty.setdefault(update.device_id, set()).update(update.changed)
         self._wake.set()
+        self.feed.changed(update.device_id, update.changed)
 
     async def _flush(self, client: MqttClient) -> None:
         if self._republish:  # after a mapping reload: new entities, new discovery
@@ -309,6 +314,7 @@ class Bridge:
         payload = error_document(key, value, error)
         log.info("%s refused: %s", device_id[:100], payload)
         self._queue(Publish(self.topics.error(device_id), payload, retain=False))
+        self.feed.refused_command(device_id, payload)
 
 
 async def _guarded(work: Any, failed: Callable[[str], None] | None) -> None:

@@ -8,6 +8,7 @@ file, a file named by ``password_file`` or an environment variable named by
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import re
 from collections import Counter
@@ -21,6 +22,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    IPvAnyAddress,
     SecretStr,
     ValidationError,
     field_validator,
@@ -241,6 +243,61 @@ class MetricsConfig(_Strict):
     port: int = Field(9464, ge=1, le=65535)
 
 
+MIN_TOKEN = 16  # characters of a web token: guessing must be hopeless
+
+
+class WebConfig(_Strict):
+    """The web page for the people at the cabinet (off by default; bridge/web)."""
+
+    enabled: bool = False
+    host: str = Field(
+        "127.0.0.1", description="address to listen on; beyond loopback a token is required"
+    )
+    port: int = Field(8099, ge=1, le=65535)
+    token: SecretStr | None = None
+    token_file: Path | None = None
+    token_env: str | None = None
+    ingress_proxies: list[IPvAnyAddress] = Field(
+        default_factory=list,
+        description="Home Assistant's ingress proxy (172.30.32.2 in an add-on): requests "
+        "from it need no token, Home Assistant has logged the user in",
+    )
+
+    @model_validator(mode="after")
+    def _token_beyond_loopback(self) -> Self:
+        given = [self.token, self.token_file, self.token_env]
+        if sum(value is not None for value in given) > 1:
+            raise ValueError("give one of token, token_file, token_env")
+        if self.token is not None and len(self.token.get_secret_value()) < MIN_TOKEN:
+            raise ValueError(f"token: at least {MIN_TOKEN} characters")
+        if self.enabled and not self.loopback and given == [None] * 3 and not self.ingress_proxies:
+            raise ValueError(
+                f"token: the page listens beyond loopback ({self.host}): give a token "
+                "(token, token_file or token_env), or listen on 127.0.0.1"
+            )
+        return self
+
+    @property
+    def loopback(self) -> bool:
+        """Listening on this machine only (nobody else can open the page)."""
+        if self.host == "localhost":
+            return True
+        try:
+            return ipaddress.ip_address(self.host).is_loopback
+        except ValueError:
+            return False  # a host name: it may resolve to anything
+
+    def token_value(self) -> str | None:
+        """The token from whichever source is configured (read now, never logged)."""
+        if self.token is not None:
+            return self.token.get_secret_value()
+        if self.token_file is not None:
+            return self.token_file.read_text(encoding="utf-8").strip()
+        if self.token_env is not None:
+            return os.environ.get(self.token_env, "").strip()
+        return None
+
+
 class ManagementConfig(_Strict):
     """The ``<base>/bridge/*`` management side: health reports, raw writes, metrics."""
 
@@ -263,6 +320,7 @@ class ManagementConfig(_Strict):
         description="folders (relative to the config file) whose mapping files a switch may name",
     )
     metrics: MetricsConfig = MetricsConfig()
+    web: WebConfig = WebConfig()
 
 
 class Config(_Strict):
@@ -340,6 +398,7 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
         raise ConfigError(str(path), _with_ids(format_validation_errors(exc), data)) from None
     mappings, errors = _load_mappings(config, path.parent)
     errors += _secret_errors(config.mqtt)
+    errors += _web_token_errors(config.bridge.web)
     errors += _topic_errors(config, mappings)
     errors += _folder_errors(config.bridge, path.parent)
     if errors:
@@ -425,6 +484,19 @@ def _secret_errors(mqtt: MqttConfig) -> list[str]:
         return [f"mqtt.password_file: no such file {str(mqtt.password_file)!r}"]
     if mqtt.password_env is not None and mqtt.password_env not in os.environ:
         return [f"mqtt.password_env: environment variable {mqtt.password_env} is not set"]
+    return []
+
+
+def _web_token_errors(web: WebConfig) -> list[str]:
+    if not web.enabled or (web.token_file is None and web.token_env is None):
+        return []
+    where = "bridge.web.token_file" if web.token_file is not None else "bridge.web.token_env"
+    try:
+        token = web.token_value() or ""
+    except OSError as exc:
+        return [f"{where}: cannot read {str(web.token_file)!r}: {exc.strerror}"]
+    if len(token) < MIN_TOKEN:
+        return [f"{where}: the token is missing or shorter than {MIN_TOKEN} characters"]
     return []
 
 

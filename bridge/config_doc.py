@@ -53,6 +53,12 @@ NOTES: dict[str, str] = {
     "ManagementConfig.metrics": "the optional Prometheus endpoint",
     "MetricsConfig.enabled": "serve Prometheus metrics over HTTP (`/metrics`)",
     "MetricsConfig.port": "TCP port of the metrics endpoint",
+    "ManagementConfig.web": "the optional web page: devices, values, health, commissioning",
+    "WebConfig.enabled": "serve the web page (README: The web page)",
+    "WebConfig.port": "TCP port of the web page",
+    "WebConfig.token": "token the page asks for (at least 16 characters; prefer token_file)",
+    "WebConfig.token_file": "file holding the token (Docker/systemd secrets)",
+    "WebConfig.token_env": "environment variable holding the token",
     "SerialBus.id": "name of the bus, used by devices[].bus",
     "SerialBus.transport": "Modbus RTU or Modbus ASCII on a serial line",
     "SerialBus.baudrate": "line speed in bit/s, as set on the devices",
@@ -106,7 +112,9 @@ Rules the tables below do not show:
   or a path to a YAML file, relative to the config file's folder; its `options` must be
   options that mapping declares, with one of their choices.
 - **Secrets**: give at most one of `password`, `password_file`, `password_env`; the
-  password is never logged or published. `tls` needs an `mqtts://` URL.
+  password is never logged or published. `tls` needs an `mqtts://` URL. Likewise one of
+  `token`, `token_file`, `token_env` for the web page, which needs one when its `host`
+  is not a loopback address (unless only Home Assistant's ingress proxy may open it).
 - A mapping that does not list `ascii` in its transports cannot be put on an `ascii` bus.
 """
 
@@ -123,6 +131,7 @@ bridge:
   health_interval: 60s
   allow_raw_writes: false
   metrics: {enabled: true, host: 0.0.0.0, port: 9464}
+  web: {enabled: true, host: 0.0.0.0, port: 8099, token_env: BRIDGE_WEB_TOKEN}
 buses:
   - id: rs485
     transport: rtu

@@ -30,6 +30,7 @@ from bridge.mqtt.broker import PROTOCOL, embedded_broker
 
 LOOPBACK = "127.0.0.1"
 DEFAULT_MODBUS_PORT = 5020
+DEFAULT_WEB_PORT = 8099
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,7 +126,8 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
         async with asyncio.timeout(10):
             await simulator.ready.wait()
         async with _broker(args.mqtt_url, args.local_broker) as broker:
-            loaded = demo_config(broker, simulator.port, args.base_topic)
+            web_port = _free_port(DEFAULT_WEB_PORT)
+            loaded = demo_config(broker, simulator.port, args.base_topic, web_port)
             bridge = Bridge(loaded)
             view = DemoView(bridge, broker_url=broker.url, broker_how=broker.how)
             view.modbus = f"{LOOPBACK}:{simulator.port}"
@@ -135,8 +137,11 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
                 await show(view, out)
 
 
-def demo_config(broker: BrokerChoice, modbus_port: int, base_topic: str) -> LoadedConfig:
-    """The bridge config of the demo: the five seed devices on one loopback TCP bus."""
+def demo_config(
+    broker: BrokerChoice, modbus_port: int, base_topic: str, web_port: int = DEFAULT_WEB_PORT
+) -> LoadedConfig:
+    """The bridge config of the demo: the five seed devices on one loopback TCP bus, and
+    the web page on loopback."""
     data: dict[str, Any] = {
         "mqtt": {
             "url": broker.url,
@@ -144,6 +149,7 @@ def demo_config(broker: BrokerChoice, modbus_port: int, base_topic: str) -> Load
             "base_topic": base_topic,
             "client_id": f"modbus-mqtt-bridge-demo-{modbus_port}",
         },
+        "bridge": {"web": {"enabled": True, "port": web_port}},
         "buses": [
             {
                 "id": "demo",

@@ -15,6 +15,7 @@ from bridge.core.codec import unit_of
 from bridge.core.entity import PollClass
 from bridge.core.state import active_alarms, published
 from bridge.modbus.poller import DevicePoller
+from bridge.web import page_url
 
 SAMPLES = 3  # values shown per device
 
@@ -39,6 +40,7 @@ class DemoView:
             f"modbus-mqtt-bridge demo: {count} simulated devices on {self.modbus} "
             "(Modbus TCP, units 1-5)",
             f"MQTT broker: {self.broker_url} ({self.broker_how})",
+            f"web page: {page_url(self.bridge.loaded.config.bridge.web)}",
             f"watch:    mosquitto_sub -h {host} -p {port} -t '{base}/#' -v",
             f"command:  mosquitto_pub -h {host} -p {port} -t {base}/{first}/start_stop/set -m ON",
             "Home Assistant: add the MQTT integration on this broker; the devices appear "

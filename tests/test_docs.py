@@ -195,9 +195,11 @@ def test_config_doc_covers_every_field() -> None:
 
 def test_config_doc_example_is_valid(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("MQTT_PASSWORD", "secret")
+    monkeypatch.setenv("BRIDGE_WEB_TOKEN", "a-long-enough-web-token")
     loaded = load_config_data(parse_yaml(EXAMPLE, "config_doc.EXAMPLE"), ROOT / "config.yaml")
     assert [d.id for d in loaded.config.devices] == ["borehole_pump", "genset", "oven"]
     assert loaded.config.bridge.metrics.enabled
+    assert loaded.config.bridge.web.token_value() == "a-long-enough-web-token"
 
 
 # --- examples/mappings/*.yaml -------------------------------------------------------------

@@ -27,17 +27,23 @@ def active_alarms(points: AnyMapping[str, Point], values: AnyMapping[str, Value]
     """Names of the alarms active in ``values``, in mapping order."""
     names: list[str] = []
     for key, point in points.items():
-        entity = point.entity
-        if not entity.alarm or key not in values:
-            continue
-        value = values[key]
-        if entity.kind == "bool" and value is True:
-            names.append(key)
-        elif entity.enum is not None and isinstance(value, str):
-            normal = {entity.enum.get(raw) for raw in entity.normal}
-            if value not in normal:
-                names.append(value)
+        if key in values and alarm_active(point, values[key]):
+            value = values[key]
+            names.append(value if isinstance(value, str) else key)
     return names
+
+
+def alarm_active(point: Point, value: Value) -> bool:
+    """True when ``value`` of an alarm entity means the alarm is on: a bit that is on, a
+    fault code that is not normal."""
+    entity = point.entity
+    if not entity.alarm:
+        return False
+    if entity.kind == "bool":
+        return value is True
+    if entity.enum is not None and isinstance(value, str):
+        return value not in {entity.enum.get(raw) for raw in entity.normal}
+    return False
 
 
 def state_document(

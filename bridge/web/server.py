@@ -1,0 +1,231 @@
+"""The page's routes: static files, the JSON API, the event stream, commissioning.
+
+    GET  /  (also app.js, style.css)     the page: static files shipped in the wheel
+    GET  api/overview                    devices, buses, MQTT link (bridge.web.views)
+    GET  api/devices/<id>                one device and every published value
+    GET  api/errors                      the last refused commands (``<device>/error``)
+    GET  api/config                      the loaded config without secrets (as bridge/info)
+    GET  api/events[?device=<id>]        Server-Sent Events: ``overview`` (at once, then at
+                                         least every second), ``device`` (at once, with
+                                         ?device), ``values`` (what changed on it),
+                                         ``errors`` (at once, oldest first),
+                                         ``refused`` (each refusal as it happens)
+    POST api/login                       {"token": ...} -> the session cookie
+    POST api/request/device/scan|read|write   the management request of the same name,
+                                         run by bridge/management.py with its limits and
+                                         guards; answered like bridge/response/<cmd>
+
+Every ``api/`` route but ``login`` needs access (bridge/web/access.py); every POST must
+come from the page itself. At most ``MAX_REQUESTS`` commissioning requests run at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import re
+import time
+from http import HTTPStatus
+from importlib import resources
+from typing import Any, Protocol
+
+from bridge import __version__
+from bridge.config import LoadedConfig, WebConfig
+from bridge.core.topics import Topics
+from bridge.management import Management
+from bridge.modbus.engine import Engine
+from bridge.web.access import Access, Refusal, change_refusal
+from bridge.web.http import EventSink, EventStream, Request, Response
+from bridge.web.live import WebFeed
+from bridge.web.views import BusWindow, changed_values, device_document, overview
+
+MAX_REQUESTS = 4  # commissioning requests from the page running at once
+OVERVIEW_EVERY = 1.0  # seconds between two overview events at most
+OVERVIEW_GAP = 0.5  # ... and at least, when devices keep changing
+SEND_GAP = 0.2  # an event stream sends at most this often (bursts are merged)
+COMMISSIONING = frozenset({"device/scan", "device/read", "device/write"})
+STATIC = {
+    "/app.js": "text/javascript; charset=utf-8",
+    "/style.css": "text/css; charset=utf-8",
+}
+_INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
+_JSON = "application/json"
+
+
+class Bridge(Protocol):
+    """What the page reads from the running bridge."""
+
+    @property
+    def loaded(self) -> LoadedConfig: ...
+    @property
+    def engine(self) -> Engine: ...
+    @property
+    def management(self) -> Management: ...
+    @property
+    def topics(self) -> Topics: ...
+    @property
+    def feed(self) -> WebFeed: ...
+    @property
+    def mqtt_state(self) -> str: ...
+
+
+class WebApp:
+    """Answers the page's requests from the running bridge."""
+
+    def __init__(self, bridge: Bridge, settings: WebConfig) -> None:
+        self.bridge = bridge
+        self.access = Access.of(settings)
+        self.window = BusWindow()
+        self.running = 0  # commissioning requests running
+        folder = resources.files(__package__) / "static"
+        self.index = (folder / "index.html").read_text(encoding="utf-8")
+        self.files = {path: (folder / path[1:]).read_bytes() for path in STATIC}
+
+    async def handle(self, request: Request) -> Response | EventStream:
+        path, method = request.path, request.method
+        if not path.startswith("/api/"):
+            if method not in ("GET", "HEAD"):
+                return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
+            return self._static(request)
+        if path == "/api/login":
+            return self._login(request)
+        refusal = self.access.refusal(request)
+        if refusal is not None:
+            return _error(refusal.status, refusal.message)
+        if path.startswith("/api/request/"):
+            return await self._request(request, path.removeprefix("/api/request/"))
+        if method not in ("GET", "HEAD"):
+            return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
+        return self._read(request)
+
+    # --- the page ---------------------------------------------------------------------
+
+    def _static(self, request: Request) -> Response:
+        if request.path in ("/", "/index.html"):
+            base = request.headers.get("x-ingress-path", "")
+            base = base if _INGRESS_PATH.match(base) and ".." not in base else ""
+            html = self.index.replace('<base href="./">', f'<base href="{base or "."}/">')
+            return Response(200, html.encode("utf-8"), "text/html; charset=utf-8")
+        if request.path in STATIC:
+            return Response(200, self.files[request.path], STATIC[request.path])
+        return _error(HTTPStatus.NOT_FOUND, "no such page")
+
+    def _login(self, request: Request) -> Response:
+        if request.method != "POST":
+            return _error(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        refusal = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            return _error(refusal.status, refusal.message)
+        given = _json_object(request.body).get("token")
+        if not isinstance(given, str) or not self.access.login(given):
+            return _error(HTTPStatus.UNAUTHORIZED, "wrong token")
+        base = request.headers.get("x-ingress-path", "")
+        path = base if _INGRESS_PATH.match(base) and ".." not in base else "/"
+        cookie = self.access.cookie_header(path)
+        return Response(200, b'{"status": "ok"}', _JSON, (cookie,))
+
+    # --- reading ----------------------------------------------------------------------
+
+    def _read(self, request: Request) -> Response | EventStream:
+        path = request.path
+        if path == "/api/overview":
+            return _json(self.overview())
+        if path == "/api/errors":
+            return _json(list(self.bridge.feed.recent))
+        if path == "/api/config":
+            info = self.bridge.management.info()
+            return _json({k: v for k, v in info.items() if not k.endswith("_schema")})
+        if path.startswith("/api/devices/"):
+            device = self.device(path.removeprefix("/api/devices/"))
+            return _json(device) if device is not None else _no_device()
+        if path == "/api/events":
+            device_id = request.query.get("device")
+            if device_id is not None and device_id not in self.bridge.engine.devices:
+                return _no_device()
+            return EventStream(lambda sink: self._events(sink, device_id))
+        return _error(HTTPStatus.NOT_FOUND, "no such API")
+
+    def overview(self) -> dict[str, Any]:
+        bridge = self.bridge
+        report = self.window.report(bridge.engine.snapshot())
+        return overview(
+            bridge.engine.devices.values(),
+            report,
+            version=__version__,
+            mqtt=bridge.mqtt_state,
+            raw_writes=bridge.loaded.config.bridge.allow_raw_writes,
+            refused=bridge.feed.refused,
+        )
+
+    def device(self, device_id: str) -> dict[str, Any] | None:
+        poller = self.bridge.engine.devices.get(device_id)
+        if poller is None:
+            return None
+        snapshot = self.bridge.engine.snapshot()
+        health = self.window.report(snapshot)["devices"].get(device_id, {})
+        return device_document(poller, health, self.bridge.topics.device(device_id))
+
+    async def _events(self, sink: EventSink, device_id: str | None) -> None:
+        """Everything at once, then what changes; an overview at least every second."""
+        with self.bridge.feed.watch(device_id) as watcher:
+            await sink.send("overview", json.dumps(self.overview()))
+            if device_id is not None:
+                await sink.send("device", json.dumps(self.device(device_id)))
+            await sink.send("errors", json.dumps(list(self.bridge.feed.recent)))
+            sent = time.monotonic()
+            while True:
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(OVERVIEW_EVERY):
+                        await watcher.wake.wait()
+                keys, refusals, changed = watcher.take()
+                poller = self.bridge.engine.devices.get(device_id or "")
+                if keys and poller is not None:
+                    await sink.send("values", json.dumps(changed_values(poller, keys)))
+                for refusal in refusals:
+                    await sink.send("refused", json.dumps(refusal))
+                elapsed = time.monotonic() - sent
+                if elapsed >= OVERVIEW_EVERY or (changed and elapsed >= OVERVIEW_GAP):
+                    await sink.send("overview", json.dumps(self.overview()))
+                    sent = time.monotonic()
+                await asyncio.sleep(SEND_GAP)
+
+    # --- commissioning ----------------------------------------------------------------
+
+    async def _request(self, request: Request, command: str) -> Response:
+        if request.method != "POST":
+            return _error(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        if command not in COMMISSIONING:
+            return _error(HTTPStatus.NOT_FOUND, f"the page runs {', '.join(sorted(COMMISSIONING))}")
+        refusal: Refusal | None = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            return _error(refusal.status, refusal.message)
+        if self.running >= MAX_REQUESTS:
+            return _error(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        self.running += 1
+        try:
+            answer = await self.bridge.management.handle(command, request.body)
+        finally:
+            self.running -= 1
+        return Response(200, answer.encode("utf-8"), _JSON)
+
+
+def _json(document: object) -> Response:
+    return Response(200, json.dumps(document, default=str).encode("utf-8"), _JSON)
+
+
+def _error(status: HTTPStatus, message: str) -> Response:
+    body = json.dumps({"status": "error", "error": message}).encode("utf-8")
+    return Response(status, body, _JSON)
+
+
+def _no_device() -> Response:
+    return _error(HTTPStatus.NOT_FOUND, "no such device")
+
+
+def _json_object(body: bytes) -> dict[str, Any]:
+    try:
+        document = json.loads(body)
+    except (ValueError, UnicodeDecodeError):
+        return {}
+    return document if isinstance(document, dict) else {}

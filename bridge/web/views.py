@@ -1,0 +1,119 @@
+"""The JSON documents of the page's API, built from what the health report and the state
+topics use: ``engine.snapshot()`` through ``build_health_report``, each poller's values
+through ``bridge.core.state``. Nothing here touches a bus or waits.
+
+    overview   {version, time, uptime_s, mqtt, raw_writes, refused, devices: [summary],
+                buses: [{id, transport, connected, utilisation, requests_per_s, requests,
+                         timeouts, frame_errors, exceptions, reopenings}]}
+    summary    {id, name, model, mapping, bus, unit, state, status, alarms, last_success,
+                latency_p50_ms, latency_p95_ms, requests, errors, timeouts, backoff_s}
+    device     summary + {topic, values: [value]}
+    value      {key, name, value, unit, decimals, alarm, component, category, writable}
+    values     {device, status, alarms, values: {key: value}}  (the keys that changed)
+
+Bus utilisation and request rates cover the last ``WINDOW`` seconds (``BusWindow``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable
+from typing import Any
+
+from bridge.core.codec import unit_of
+from bridge.core.health_report import Snapshot, build_health_report
+from bridge.core.state import active_alarms, alarm_active, published
+from bridge.modbus.poller import DevicePoller
+
+WINDOW = 10.0  # seconds of bus traffic the utilisation covers
+
+
+class BusWindow:
+    """Snapshots of the last ``WINDOW`` seconds, so that rates cover a recent stretch."""
+
+    def __init__(self, window: float = WINDOW) -> None:
+        self.window = window
+        self._kept: deque[Snapshot] = deque()
+
+    def report(self, snapshot: Snapshot) -> dict[str, Any]:
+        """The health document of ``snapshot``, rates since the oldest snapshot kept."""
+        while self._kept and snapshot.monotonic - self._kept[0].monotonic > self.window:
+            self._kept.popleft()
+        previous = self._kept[0] if self._kept else None
+        if not self._kept or snapshot.monotonic - self._kept[-1].monotonic >= 1.0:
+            self._kept.append(snapshot)
+        return build_health_report(snapshot, previous)
+
+
+def overview(
+    pollers: Iterable[DevicePoller], report: dict[str, Any], **bridge: Any
+) -> dict[str, Any]:
+    """The overview document: ``bridge`` fields (version, mqtt, raw_writes, refused) first."""
+    return {
+        **bridge,
+        "time": report["timestamp"],
+        "uptime_s": report["uptime_s"],
+        "devices": [summary(p, report["devices"].get(p.device.id, {})) for p in pollers],
+        "buses": [{"id": bus_id, **bus} for bus_id, bus in report["buses"].items()],
+    }
+
+
+def summary(poller: DevicePoller, health: dict[str, Any]) -> dict[str, Any]:
+    """One device's row: who it is, whether it answers, how fast, how often it failed."""
+    device, mapping = poller.device, poller.mapping
+    return {
+        "id": device.id,
+        "name": device.display_name,
+        "model": f"{mapping.manufacturer} {mapping.model}",
+        "mapping": device.mapping,
+        "bus": device.bus,
+        "unit": device.unit,
+        "state": health.get("state", "unknown"),
+        "status": poller.values.get(mapping.status) if mapping.status else None,
+        "alarms": active_alarms(poller.points, poller.values),
+        "last_success": health.get("last_success"),
+        "latency_p50_ms": health.get("latency_p50_ms"),
+        "latency_p95_ms": health.get("latency_p95_ms"),
+        "requests": health.get("requests", 0),
+        "errors": health.get("errors", 0),
+        "timeouts": health.get("timeouts", 0),
+        "backoff_s": health.get("backoff_s", 0.0),
+    }
+
+
+def device_document(poller: DevicePoller, health: dict[str, Any], topic: str) -> dict[str, Any]:
+    """A device's page: its summary, its MQTT topic and every published value."""
+    return {
+        **summary(poller, health),
+        "topic": topic,
+        "values": [value_row(poller, key) for key in published(poller.points)],
+    }
+
+
+def value_row(poller: DevicePoller, key: str) -> dict[str, Any]:
+    point = poller.points[key]
+    entity = point.entity
+    value = poller.values.get(key)
+    return {
+        "key": key,
+        "name": entity.name,
+        "value": value,
+        "unit": unit_of(point, poller.image),
+        "decimals": entity.decimals,
+        "alarm": alarm_active(point, value),
+        "component": entity.component.value,
+        "category": entity.ha.entity_category,
+        "writable": entity.writable,
+    }
+
+
+def changed_values(poller: DevicePoller, keys: Iterable[str]) -> dict[str, Any]:
+    """The values of ``keys`` (those published) with the device's status and alarms."""
+    shown = set(published(poller.points))
+    mapping = poller.mapping
+    return {
+        "device": poller.device.id,
+        "status": poller.values.get(mapping.status) if mapping.status else None,
+        "alarms": active_alarms(poller.points, poller.values),
+        "values": {key: value_row(poller, key) for key in sorted(set(keys) & shown)},
+    }
