@@ -247,7 +247,8 @@ MIN_TOKEN = 16  # characters of a web token: guessing must be hopeless
 
 
 class WebConfig(_Strict):
-    """The web page for the people at the cabinet (off by default; bridge/web)."""
+    """The web page: devices, live values, bus health, refused commands, commissioning
+    (off by default; see the README, The web page)."""
 
     enabled: bool = False
     host: str = Field(

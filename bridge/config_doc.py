@@ -204,6 +204,7 @@ def _sections(schema: Schema) -> Iterator[Section]:
     yield Section("mqtt-tls", "`mqtt.tls`", "TlsConfig", defs["TlsConfig"])
     yield Section("bridge", "`bridge`", "ManagementConfig", defs["ManagementConfig"])
     yield Section("bridge-metrics", "`bridge.metrics`", "MetricsConfig", defs["MetricsConfig"])
+    yield Section("bridge-web", "`bridge.web`", "WebConfig", defs["WebConfig"])
     for name, title, anchor in _bus_kinds(schema):
         transports = " or ".join(f"`{t}`" for t in defs[name]["properties"]["transport"]["enum"])
         lead = f"A bus whose `transport` is {transports}."
@@ -293,6 +294,7 @@ _ANCHORS = {
     "TlsConfig": ("mqtt.tls", "mqtt-tls"),
     "ManagementConfig": ("bridge", "bridge"),
     "MetricsConfig": ("bridge.metrics", "bridge-metrics"),
+    "WebConfig": ("bridge.web", "bridge-web"),
     "DeviceConfig": ("devices[]", "devices"),
     "PollConfig": ("devices[].poll", "devices-poll"),
     "ProtocolOverride": ("devices[].protocol", "devices-protocol"),

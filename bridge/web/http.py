@@ -151,6 +151,7 @@ class HttpServer:
     handler: Handler
     max_connections: int = MAX_CONNECTIONS
     _tasks: set[asyncio.Task[None]] = field(default_factory=set)
+    _closing: bool = False
 
     async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """One connection: one request and its answer (or an event stream), then close."""
@@ -158,19 +159,21 @@ class HttpServer:
         if task is not None:  # always: asyncio runs each connection's handler in a task
             self._tasks.add(task)
         try:
-            if len(self._tasks) > self.max_connections:
-                await self._answer(writer, plain(HTTPStatus.SERVICE_UNAVAILABLE, "too busy"))
-                return
-            await self._one_request(reader, writer)
+            await self._one_request(reader, writer, busy=len(self._tasks) > self.max_connections)
         except (ConnectionError, TimeoutError):
             pass  # the client went away or never finished asking: nothing to answer
+        except asyncio.CancelledError:
+            if not self._closing:
+                raise
+            # ``close()`` ended this connection: end quietly (asyncio 3.11 logs a cancelled
+            # connection task as an error)
         finally:
             if task is not None:
                 self._tasks.discard(task)
             writer.close()
 
     async def _one_request(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, *, busy: bool
     ) -> None:
         peer = writer.get_extra_info("peername")
         try:
@@ -185,6 +188,9 @@ class HttpServer:
             return
         except BadRequestError as exc:
             await self._answer(writer, plain(exc.status, str(exc)))
+            return
+        if busy:  # answered once read: closing on unread bytes would reset the connection
+            await self._answer(writer, plain(HTTPStatus.SERVICE_UNAVAILABLE, "too busy"))
             return
         request = replace(request, body=body)
         try:
@@ -235,6 +241,7 @@ class HttpServer:
 
     async def close(self) -> None:
         """End every connection (event streams included) and wait for them."""
+        self._closing = True
         tasks = list(self._tasks)
         for task in tasks:
             task.cancel()

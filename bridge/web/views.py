@@ -36,8 +36,9 @@ class BusWindow:
         self._kept: deque[Snapshot] = deque()
 
     def report(self, snapshot: Snapshot) -> dict[str, Any]:
-        """The health document of ``snapshot``, rates since the oldest snapshot kept."""
-        while self._kept and snapshot.monotonic - self._kept[0].monotonic > self.window:
+        """The health document of ``snapshot``, rates since the newest snapshot kept that is
+        at least ``window`` seconds old (or the oldest kept, or the start)."""
+        while len(self._kept) > 1 and snapshot.monotonic - self._kept[1].monotonic >= self.window:
             self._kept.popleft()
         previous = self._kept[0] if self._kept else None
         if not self._kept or snapshot.monotonic - self._kept[-1].monotonic >= 1.0:
