@@ -1,0 +1,110 @@
+"""The web page in a real browser: headless Chromium (Debian's ``chromium``; .ci/run installs
+it) against a running bridge, the simulator and a private Mosquitto.
+
+What a technician at the cabinet would check: a value changes on screen, an alarm is
+highlighted, a device goes offline and comes back, a bus scan finds the units, all
+operated from the keyboard. Skipped where Chromium is absent.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+from bridge.modbus.simulator import Quirks
+from tests.integration.browser import CHROMIUM, Page, browser
+from tests.integration.mosquitto import Broker
+from tests.integration.web import PUMP, site
+
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)"
+)
+SCREENSHOTS = os.environ.get("BRIDGE_SCREENSHOTS")  # a folder: keep the screenshots there
+
+
+def text(selector: str) -> str:
+    """A JavaScript expression: the text of the element ``selector`` finds, or ''."""
+    return f"(document.querySelector({selector!r})?.textContent ?? '').trim()"
+
+
+async def device_state(page: Page, expected: str) -> None:
+    await page.until(f"{text('#device-facts dd.state')} === {expected!r}", timeout=20)
+
+
+@pytest.mark.asyncio
+@pytest.mark.timeout(90)
+async def test_a_technician_sees_values_change_a_device_drop_out_and_a_scan(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path) as s, browser(tmp_path) as page:
+        home = f"http://127.0.0.1:{s.port}/"
+        await page.goto(home)
+        pump_state = text('#devices tr[data-device="pump"] .state')
+        await page.until(f"{pump_state} === 'online'")
+        starter_state = text('#devices tr[data-device="starter"] .state')
+        await page.until(f"{starter_state} === 'online'")
+        assert await page.evaluate(text("#link")) == "MQTT online · page live"
+        await _screenshot(page, tmp_path, "web-devices.png")
+        # everything it loaded came from the bridge: no CDN, no web fonts
+        loaded = await page.evaluate("performance.getEntriesByType('resource').map(e => e.name)")
+        assert loaded and all(url.startswith(home) for url in loaded), loaded
+        # on a phone the page itself never scrolls sideways (wide tables scroll in place)
+        await page.send(
+            "Emulation.setDeviceMetricsOverride",
+            width=360,
+            height=740,
+            deviceScaleFactor=2,
+            mobile=True,
+        )
+        await page.until("document.documentElement.scrollWidth <= window.innerWidth")
+
+        # the devices page links to each device; follow the link from the keyboard
+        await page.evaluate("document.querySelector('#devices a[href=\"#/device/pump\"]').focus()")
+        await page.press("Enter", 13)
+        await page.until(f"{text('#device-title')} === 'Pump'")
+        assert await page.evaluate("document.activeElement.id") == "device-title"
+
+        value = text('#values tr[data-key="motor_current"] .value')
+        s.sim.set_value(PUMP, "motor_current", 12.3)
+        await page.until(f"{value} === '12.3'")
+        s.sim.set_value(PUMP, "motor_current", 4.2)
+        await page.until(f"{value} === '4.2'")
+        unit = await page.evaluate(text('#values tr[data-key="motor_current"] td:nth-child(3)'))
+        assert unit == "A"
+
+        dry = '#values tr[data-key="alarm_dry_running"]'
+        s.sim.set_value(PUMP, "alarm_dry_running", True)
+        await page.until(f"document.querySelector({dry!r})?.classList.contains('alarm')")
+        assert "ALARM" in await page.evaluate(text(dry))
+        alarms = await page.until(text("#device-alarms"))
+        assert alarms == "Active alarms: alarm_dry_running"
+
+        await device_state(page, "online")
+        s.sim.set_quirks(PUMP, Quirks(dead=True))
+        await device_state(page, "offline")
+        s.sim.set_quirks(PUMP, Quirks())
+        await device_state(page, "online")
+
+        await page.goto(home + "#/commission")
+        await page.until(f"{text('#scan-bus')} === 'tcp'")
+        await page.evaluate(
+            "(() => { const units = document.querySelector('#scan-units');"
+            " units.value = '1-5'; units.focus(); })()"
+        )
+        await page.press("Enter", 13)  # submits the scan form from the keyboard
+        starter = text('#scan-result tr[data-unit="3"]')
+        await page.until(f"{starter}.includes('starter')", timeout=20)
+        assert await page.evaluate(text("#scan-status")) == "2 of 5 units answered on tcp"
+        assert "pump" in await page.evaluate(text('#scan-result tr[data-unit="1"]'))
+        await _screenshot(page, tmp_path, "web-commissioning.png")
+
+
+async def _screenshot(page: Page, folder: Path, name: str) -> None:
+    path = folder / name
+    await page.screenshot(path, 1200, 700)
+    assert path.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    if SCREENSHOTS:
+        shutil.copy(path, Path(SCREENSHOTS) / name)
