@@ -141,14 +141,14 @@ def test_the_page_is_off_by_default_and_on_loopback_when_on() -> None:
     assert WebConfig(enabled=True).token_value() is None
     for host in ("localhost", "127.0.0.5", "::1"):
         assert WebConfig(host=host).loopback, host
-    for host in ("0.0.0.0", "192.168.1.10", "::", "bridge.local"):  # noqa: S104
+    for host in ("0.0.0.0", "192.168.1.10", "::", "bridge.local"):
         assert not WebConfig(host=host).loopback, host
 
 
 @pytest.mark.parametrize(
     ("settings", "words"),
     [
-        ({"enabled": True, "host": "0.0.0.0"}, "give a token"),  # noqa: S104
+        ({"enabled": True, "host": "0.0.0.0"}, "give a token"),
         ({"enabled": True, "host": "bridge.local"}, "give a token"),
         ({"token": "short"}, "at least 16 characters"),
         ({"token": TOKEN, "token_env": "X"}, "give one of token, token_file, token_env"),
@@ -161,14 +161,14 @@ def test_bad_web_settings_are_refused(settings: dict[str, Any], words: str) -> N
 
 
 def test_beyond_loopback_a_token_or_the_ingress_proxy_is_enough() -> None:
-    assert WebConfig(enabled=True, host="0.0.0.0", token=TOKEN).token_value() == TOKEN  # noqa: S106,S104
-    ingress = WebConfig(enabled=True, host="0.0.0.0", ingress_proxies=["172.30.32.2"])  # noqa: S104
+    assert WebConfig(enabled=True, host="0.0.0.0", token=TOKEN).token_value() == TOKEN
+    ingress = WebConfig(enabled=True, host="0.0.0.0", ingress_proxies=["172.30.32.2"])
     assert [str(a) for a in ingress.ingress_proxies] == ["172.30.32.2"]
 
 
 def config_with(web: dict[str, Any], folder: Path) -> Any:
     data = {
-        "bridge": {"web": {"enabled": True, "host": "0.0.0.0"} | web},  # noqa: S104
+        "bridge": {"web": {"enabled": True, "host": "0.0.0.0"} | web},
         "buses": [{"id": "tcp", "transport": "tcp", "host": "127.0.0.1"}],
     }
     return load_config_data(data, folder / "config.yaml")
@@ -200,9 +200,9 @@ def test_a_token_from_a_file_or_the_environment_is_checked_at_load(
 
 def test_page_url_names_an_address_a_browser_can_open() -> None:
     assert page_url(WebConfig()) == "http://127.0.0.1:8099/"
-    assert page_url(WebConfig(host="0.0.0.0", port=80, token=TOKEN)) == "http://127.0.0.1:80/"  # noqa: S104,S106
+    assert page_url(WebConfig(host="0.0.0.0", port=80, token=TOKEN)) == "http://127.0.0.1:80/"
     assert page_url(WebConfig(host="::1")) == "http://[::1]:8099/"
-    assert page_url(WebConfig(host="10.1.2.3", token=TOKEN)) == "http://10.1.2.3:8099/"  # noqa: S106
+    assert page_url(WebConfig(host="10.1.2.3", token=TOKEN)) == "http://10.1.2.3:8099/"
 
 
 # --- the feed and the bus window --------------------------------------------------------
