@@ -25,22 +25,23 @@ from bridge.config import WebConfig
 from bridge.web.live import WebFeed
 
 if TYPE_CHECKING:
-    from bridge.web.server import Bridge
+    from bridge.web.server import BridgeState
 
 __all__ = ["WebFeed", "serve_web"]
 log = logging.getLogger(__name__)
 
 
 @contextlib.asynccontextmanager
-async def serve_web(settings: WebConfig, bridge: Bridge) -> AsyncIterator[None]:
+async def serve_web(settings: WebConfig, bridge: BridgeState) -> AsyncIterator[None]:
     """Serve the page for the duration of the block when ``settings.enabled``."""
     if not settings.enabled:
         yield
         return
-    from bridge.web.http import HEAD_LIMIT, HttpServer  # noqa: PLC0415 - only when on
-    from bridge.web.server import WebApp  # noqa: PLC0415
+    from bridge.web.access import Access  # noqa: PLC0415 - only when on
+    from bridge.web.http import HEAD_LIMIT, HttpServer  # noqa: PLC0415
+    from bridge.web.server import WebApp, load_static  # noqa: PLC0415
 
-    http = HttpServer(WebApp(bridge, settings).handle)
+    http = HttpServer(WebApp(bridge, Access.of(settings), load_static()).handle)
     try:
         server = await asyncio.start_server(
             http.serve, settings.host, settings.port, limit=HEAD_LIMIT

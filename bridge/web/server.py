@@ -24,14 +24,16 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import re
 import time
+from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
 from typing import Any, Protocol
 
 from bridge import __version__
-from bridge.config import LoadedConfig, WebConfig
+from bridge.config import LoadedConfig
 from bridge.core.topics import Topics
 from bridge.management import Management
 from bridge.modbus.engine import Engine
@@ -51,9 +53,24 @@ STATIC = {
 }
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
+log = logging.getLogger(__name__)
 
 
-class Bridge(Protocol):
+@dataclass(frozen=True, slots=True)
+class StaticFiles:
+    """The page as shipped in the wheel: ``index.html`` and the files of ``STATIC``."""
+
+    index: str
+    files: dict[str, bytes]
+
+
+def load_static() -> StaticFiles:
+    folder = resources.files(__package__) / "static"
+    index = (folder / "index.html").read_text(encoding="utf-8")
+    return StaticFiles(index, {path: (folder / path[1:]).read_bytes() for path in STATIC})
+
+
+class BridgeState(Protocol):
     """What the page reads from the running bridge."""
 
     @property
@@ -73,14 +90,12 @@ class Bridge(Protocol):
 class WebApp:
     """Answers the page's requests from the running bridge."""
 
-    def __init__(self, bridge: Bridge, settings: WebConfig) -> None:
+    def __init__(self, bridge: BridgeState, access: Access, static: StaticFiles) -> None:
         self.bridge = bridge
-        self.access = Access.of(settings)
+        self.access = access
+        self.static = static
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
-        folder = resources.files(__package__) / "static"
-        self.index = (folder / "index.html").read_text(encoding="utf-8")
-        self.files = {path: (folder / path[1:]).read_bytes() for path in STATIC}
 
     async def handle(self, request: Request) -> Response | EventStream:
         path, method = request.path, request.method
@@ -105,10 +120,10 @@ class WebApp:
         if request.path in ("/", "/index.html"):
             base = request.headers.get("x-ingress-path", "")
             base = base if _INGRESS_PATH.match(base) and ".." not in base else ""
-            html = self.index.replace('<base href="./">', f'<base href="{base or "."}/">')
+            html = self.static.index.replace('<base href="./">', f'<base href="{base or "."}/">')
             return Response(200, html.encode("utf-8"), "text/html; charset=utf-8")
         if request.path in STATIC:
-            return Response(200, self.files[request.path], STATIC[request.path])
+            return Response(200, self.static.files[request.path], STATIC[request.path])
         return _error(HTTPStatus.NOT_FOUND, "no such page")
 
     def _login(self, request: Request) -> Response:
@@ -140,6 +155,8 @@ class WebApp:
             device = self.device(path.removeprefix("/api/devices/"))
             return _json(device) if device is not None else _no_device()
         if path == "/api/events":
+            if request.method != "GET":
+                return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
             device_id = request.query.get("device")
             if device_id is not None and device_id not in self.bridge.engine.devices:
                 return _no_device()
@@ -202,6 +219,8 @@ class WebApp:
             return _error(refusal.status, refusal.message)
         if self.running >= MAX_REQUESTS:
             return _error(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        if command == "device/write":  # who wrote what, for the site's records
+            log.info("raw write from the web page (%s): %s", request.peer, request.body[:300])
         self.running += 1
         try:
             answer = await self.bridge.management.handle(command, request.body)

@@ -186,7 +186,7 @@ async def test_commissioning_runs_through_the_management_code(
 
 @pytest.mark.asyncio
 async def test_raw_writes_when_allowed_keep_the_dangerous_write_guard(
-    mosquitto: Broker, tmp_path: Path
+    mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     async with site(mosquitto, tmp_path, bridge={"allow_raw_writes": True}) as s:
         overview = await both_online(s.port)
@@ -195,6 +195,7 @@ async def test_raw_writes_when_allowed_keep_the_dangerous_write_guard(
         done = (await http(s.port, "POST", "/api/request/device/write", write)).json()
         assert done["status"] == "ok", done
         assert s.sim.image(PUMP)[(Table.HOLDING, 0x34)] == 123
+        assert "raw write from the web page (127.0.0.1)" in caplog.text  # the site's record
         rated = {"device": "pump", "address": 54, "values": [60]}  # rated motor frequency
         guarded = (await http(s.port, "POST", "/api/request/device/write", rated)).json()
         assert guarded["status"] == "error" and "allow_dangerous_writes" in guarded["error"]
@@ -289,6 +290,7 @@ async def test_static_files_and_http_errors(mosquitto: Broker, tmp_path: Path) -
         assert (await http(s.port, "GET", "/../pyproject.toml")).status == 404
         assert (await http(s.port, "GET", "/api/nothing")).status == 404
         assert (await http(s.port, "DELETE", "/")).status == 405
+        assert (await http(s.port, "HEAD", "/api/events")).status == 405
 
 
 @pytest.mark.asyncio
