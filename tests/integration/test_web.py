@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import subprocess
 import sys
 from pathlib import Path
@@ -188,6 +189,7 @@ async def test_commissioning_runs_through_the_management_code(
 async def test_raw_writes_when_allowed_keep_the_dangerous_write_guard(
     mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
+    caplog.set_level(logging.INFO, logger="bridge.web.server")
     async with site(mosquitto, tmp_path, bridge={"allow_raw_writes": True}) as s:
         overview = await both_online(s.port)
         assert overview["raw_writes"] is True
