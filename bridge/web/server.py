@@ -27,6 +27,7 @@ import json
 import logging
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
@@ -46,6 +47,7 @@ MAX_REQUESTS = 4  # commissioning requests from the page running at once
 OVERVIEW_EVERY = 1.0  # seconds between two overview events at most
 OVERVIEW_GAP = 0.5  # ... and at least, when devices keep changing
 SEND_GAP = 0.2  # an event stream sends at most this often (bursts are merged)
+FRESH = 0.25  # seconds an overview (or a fetched device page) is served again as built
 COMMISSIONING = frozenset({"device/scan", "device/read", "device/write"})
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
@@ -96,6 +98,7 @@ class WebApp:
         self.static = static
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
+        self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
 
     async def handle(self, request: Request) -> Response | EventStream:
         path, method = request.path, request.method
@@ -145,23 +148,36 @@ class WebApp:
     def _read(self, request: Request) -> Response | EventStream:
         path = request.path
         if path == "/api/overview":
-            return _json(self.overview())
+            return Response(200, self._fresh("overview", self.overview), _JSON)
         if path == "/api/errors":
             return _json(list(self.bridge.feed.recent))
         if path == "/api/config":
             info = self.bridge.management.info()
             return _json({k: v for k, v in info.items() if not k.endswith("_schema")})
         if path.startswith("/api/devices/"):
-            device = self.device(path.removeprefix("/api/devices/"))
-            return _json(device) if device is not None else _no_device()
+            device_id = path.removeprefix("/api/devices/")
+            if device_id not in self.bridge.engine.devices:
+                return _no_device()
+            document = self._fresh(f"device:{device_id}", lambda: self.device(device_id))
+            return Response(200, document, _JSON)
         if path == "/api/events":
             if request.method != "GET":
                 return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
-            device_id = request.query.get("device")
-            if device_id is not None and device_id not in self.bridge.engine.devices:
+            shown = request.query.get("device")
+            if shown is not None and shown not in self.bridge.engine.devices:
                 return _no_device()
-            return EventStream(lambda sink: self._events(sink, device_id))
+            return EventStream(lambda sink: self._events(sink, shown))
         return _error(HTTPStatus.NOT_FOUND, "no such API")
+
+    def _fresh(self, name: str, build: Callable[[], object]) -> bytes:
+        """The JSON of ``build()``, built at most once per ``FRESH`` seconds: a hundred
+        browsers cost one build, whatever they ask."""
+        now = time.monotonic()
+        built = self._built.get(name)
+        if built is None or now - built[0] > FRESH:
+            built = (now, json.dumps(build(), default=str).encode("utf-8"))
+            self._built[name] = built
+        return built[1]
 
     def overview(self) -> dict[str, Any]:
         bridge = self.bridge
@@ -186,8 +202,8 @@ class WebApp:
     async def _events(self, sink: EventSink, device_id: str | None) -> None:
         """Everything at once, then what changes; an overview at least every second."""
         with self.bridge.feed.watch(device_id) as watcher:
-            await sink.send("overview", json.dumps(self.overview()))
-            if device_id is not None:
+            await sink.send("overview", self._fresh("overview", self.overview).decode())
+            if device_id is not None:  # built now: no change after this one is missed
                 await sink.send("device", json.dumps(self.device(device_id)))
             await sink.send("errors", json.dumps(list(self.bridge.feed.recent)))
             sent = time.monotonic()
@@ -203,7 +219,7 @@ class WebApp:
                     await sink.send("refused", json.dumps(refusal))
                 elapsed = time.monotonic() - sent
                 if elapsed >= OVERVIEW_EVERY or (changed and elapsed >= OVERVIEW_GAP):
-                    await sink.send("overview", json.dumps(self.overview()))
+                    await sink.send("overview", self._fresh("overview", self.overview).decode())
                     sent = time.monotonic()
                 await asyncio.sleep(SEND_GAP)
 
