@@ -14,16 +14,19 @@ import logging
 import subprocess
 import sys
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import pytest
 
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
 from bridge.core.entity import Table
+from bridge.demo import SEEDS
 from bridge.modbus.simulator import Quirks
 from bridge.mqtt import MqttClient
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker
+from tests.integration.test_demo import demo, read_until, stop
 from tests.integration.web import PUMP, STARTER, TOKEN, events, free_port, http, site
 
 JSON = {"Content-Type": "application/json"}
@@ -321,3 +324,18 @@ def test_the_page_off_imports_no_server_code() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     )
     assert loaded.stdout.strip() == "['bridge.web', 'bridge.web.live']"
+
+
+@pytest.mark.asyncio
+async def test_the_demo_prints_the_page_url_and_serves_the_five_devices(
+    mosquitto: Broker,
+) -> None:
+    with demo("--mqtt-url", mosquitto.url) as process:
+        lines = await read_until(process, "ready:")
+        (shown,) = [line for line in lines if line.startswith("web page: ")]
+        url = urlsplit(shown.removeprefix("web page: "))
+        assert url.hostname == "127.0.0.1" and url.path == "/" and url.port
+        overview = (await http(url.port, "GET", "/api/overview")).json()
+        assert {d["id"] for d in overview["devices"]} == {seed.id for seed in SEEDS}
+        assert (await http(url.port, "GET", "/")).status == 200
+        await stop(process)
