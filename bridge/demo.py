@@ -3,7 +3,8 @@
 It serves the five shipped mappings as simulated units 1..5 on a loopback Modbus TCP
 port, picks a broker (``--mqtt-url``, else 127.0.0.1:1883 if something answers there,
 else an embedded one), runs the real bridge against them with Home Assistant discovery,
-and shows a live table of the devices, their state and the topics to subscribe to.
+and shows a live table of the devices, their state and the topics to subscribe to; the
+web page (bridge/web) runs on loopback, its URL printed with the table.
 Ctrl-C (or SIGTERM) stops everything.
 """
 
