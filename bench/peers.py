@@ -20,23 +20,27 @@ it) on a free loopback port, and every bridge process is stopped by PID.
 Per bridge, two runs. The first, polling unit 1 only, measures in order:
 
 * over the ``--seconds`` window (30 s) after a 5 s warm-up: CPU (utime + stime of the
-  bridge process and its children, ``/proc/<pid>/stat``, % of one core), the poll period
-  achieved (the relay's reads of the first register of the list), and MQTT bytes at a
-  subscriber to ``#`` (topic + payload of every message the bridge sent, so MQTT headers
-  not counted) per second and per poll cycle (per second x the period achieved);
+  bridge process and its children, ``/proc/<pid>/stat``: % of one core, and per poll
+  cycle), the poll period achieved (mean interval between the relay's reads of the first
+  register of the list), and MQTT bytes at a subscriber to ``#``: topic + payload of
+  every message the bridge sent (MQTT headers not counted), per second and per poll
+  cycle (per second x the period achieved);
 * peak RSS: ``VmHWM`` of the process(es) (``/proc/<pid>/status``) after the window;
 * ``--commands`` run/stop commands, each the opposite of the value last seen, after a
   random 0.2-1.2 s pause: from the publish (QoS 1) to the new value on MQTT;
-* a 5 s broker outage (mosquitto stopped and started on the same port, no persistence so
-  nothing retained survives): the first value on MQTT after the broker accepts
+* a 5 s broker outage (mosquitto stopped, then started on the same port; no persistence,
+  so nothing retained survives): the first value on MQTT after the broker accepts
   connections again (the subscriber is back within milliseconds), and how many of the
-  38 values came back in the 10 s after.
+  38 values came back whole in the 10 s after.
 
-The second run adds the dead unit 2 to each config and measures unit 1's poll period
-over the same window, after a 10 s warm-up.
+The second run adds the dead unit 2 to each config (modbus4mqtt: a second process) and
+measures unit 1's poll period over the same window after a 10 s warm-up; a bridge that
+does not poll unit 1 twice in the window gets a lower bound (``> N s``: the time since
+its last poll of unit 1). All of it takes about 7 minutes; ``--keep DIR`` keeps every
+run's configs and logs (bridge, device, relay requests, MQTT messages seen).
 
     .venv/bin/python bench/peers.py [--seconds 30] [--commands 20] [--latency 0.02]
-                                    [--only bridge|modbus4mqtt|modbus2mqtt]
+                                    [--only bridge|modbus4mqtt|modbus2mqtt] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -104,6 +108,7 @@ def tree_hwm_kib(pids: list[int]) -> int:
 @dataclass
 class Seen:
     at: float
+    topic: str
     size: int  # topic + payload bytes
     names: frozenset[str]  # the values it carries (topic names, see Kind.read)
 
@@ -146,7 +151,7 @@ class Watcher:
                 continue
             values = self.kind.read(message.topic, message.payload)
             size = len(message.topic.encode()) + len(message.payload)
-            self.seen.append(Seen(arrived, size, frozenset(values)))
+            self.seen.append(Seen(arrived, message.topic, size, frozenset(values)))
             command = self.kind.command_name
             if command in values:
                 self.state = truth(values[command])
@@ -179,8 +184,9 @@ class Figures:
 async def setup(
     kind: Kind, units: list[int], latency: float, folder: Path
 ) -> AsyncIterator[tuple[NodelayBroker, Watcher, list[subprocess.Popen[bytes]], Path]]:
-    """Broker, device and bridge process(es) for one run; yields the broker, the
-    bridge's PIDs and the request log."""
+    """Broker, device, subscriber and bridge process(es) for one run; yields the broker,
+    the subscriber, the bridge processes and the relay's request log. What the
+    subscriber saw goes to ``mqtt.log`` (``<time> <bytes> <topic>``) beside it."""
     broker = NodelayBroker(folder)
     broker.start()
     try:
@@ -196,7 +202,11 @@ async def setup(
                 stack.enter_context(process(argv, folder / f"{kind.name}-{i}.log"))
                 for i, argv in enumerate(kind.argv(Run(paths, broker.port, port, units)))
             ]
-            yield broker, watcher, children, log
+            try:
+                yield broker, watcher, children, log
+            finally:
+                lines = (f"{s.at:.6f} {s.size} {s.topic}\n" for s in watcher.seen)
+                (folder / "mqtt.log").write_text("".join(lines))
             for child in children:
                 if child.poll() is not None:
                     raise RuntimeError(f"{kind.name} exited early ({child.returncode})")
@@ -325,6 +335,7 @@ def rows(figures: dict[str, Figures], latency: float) -> list[tuple[str, list[st
         ("state republished after a 5 s broker outage",
          [f"{f.back}/{len(KEYS)}" for f in found]),
         ("CPU, % of one core (window)", [f"{f.cpu:.2f}" for f in found]),
+        ("CPU per poll cycle, ms", [f"{10 * f.cpu * f.period:.1f}" for f in found]),
         ("peak RSS (VmHWM), MiB", [f"{f.hwm_mib:.1f}" for f in found]),
         ("MQTT bytes per poll cycle (topic + payload)",
          [f"{f.bytes_per_second * f.period:.0f}" for f in found]),
