@@ -159,8 +159,8 @@ class Watcher:
                 if wanted is not None and wanted[0] == self.state and not wanted[1].done():
                     wanted[1].set_result(arrived)
 
-    def names_since(self, since: float, until: float = float("inf")) -> set[str]:
-        return {n for s in self.seen if since <= s.at < until for n in s.names}
+    def names_since(self, since: float) -> set[str]:
+        return {n for s in self.seen if s.at >= since for n in s.names}
 
 
 # --- one bridge ---------------------------------------------------------------------------
@@ -283,36 +283,50 @@ async def outage(broker: NodelayBroker, watcher: Watcher, kind: Kind, figures: F
 async def measure(kind: Kind, args: argparse.Namespace) -> Figures:
     figures = Figures()
     with run_folder(args.keep, kind.name) as folder:
-        async with setup(kind, [UNIT], args.latency, folder) as (broker, watcher, children, log):
-            pids = [c.pid for c in children]
-            await wait_for_values(watcher, kind)
-            await asyncio.sleep(WARMUP)
-            start, cpu = time.monotonic(), tree_cpu(pids)
-            await asyncio.sleep(args.seconds)
-            end = time.monotonic()
-            figures.cpu = 100 * (tree_cpu(pids) - cpu) / (end - start)
-            figures.hwm_mib = tree_hwm_kib(pids) / 1024
-            figures.period = mean_gap(marker_reads(log), start, end) or float("inf")
-            sent = sum(s.size for s in watcher.seen if start <= s.at < end)
-            figures.bytes_per_second = sent / (end - start)
-            await commands(watcher, kind, args.commands, figures)
-            await outage(broker, watcher, kind, figures)
+        await measure_alone(kind, args, folder, figures)
     with run_folder(args.keep, f"{kind.name}-dead-unit") as folder:
-        started = time.monotonic()
-        async with setup(kind, [UNIT, DEAD_UNIT], args.latency, folder) as (_, _, children, log):
-            await asyncio.sleep(DEAD_WARMUP)
-            start = time.monotonic()
-            await asyncio.sleep(args.seconds)
-            end = time.monotonic()
-            reads = marker_reads(log)
-        gap = mean_gap(reads, start, end)
-        if gap is None:  # not polled twice in the window: at least since its last poll
-            last = max((t for t in reads if t < end), default=started)
-            figures.dead_period = f"> {end - last:.0f} s"
-        else:
-            figures.dead_period = f"{gap:.2f} s"
-        figures.notes.append(f"{len(children)} process(es) in the dead-unit run")
+        await measure_beside_dead_unit(kind, args, folder, figures)
     return figures
+
+
+async def measure_alone(
+    kind: Kind, args: argparse.Namespace, folder: Path, figures: Figures
+) -> None:
+    """Unit 1 alone: the window, the commands, the broker outage."""
+    async with setup(kind, [UNIT], args.latency, folder) as (broker, watcher, children, log):
+        pids = [c.pid for c in children]
+        await wait_for_values(watcher, kind)
+        await asyncio.sleep(WARMUP)
+        start, cpu = time.monotonic(), tree_cpu(pids)
+        await asyncio.sleep(args.seconds)
+        end = time.monotonic()
+        figures.cpu = 100 * (tree_cpu(pids) - cpu) / (end - start)
+        figures.hwm_mib = tree_hwm_kib(pids) / 1024
+        figures.period = mean_gap(marker_reads(log), start, end) or float("inf")
+        sent = sum(s.size for s in watcher.seen if start <= s.at < end)
+        figures.bytes_per_second = sent / (end - start)
+        await commands(watcher, kind, args.commands, figures)
+        await outage(broker, watcher, kind, figures)
+
+
+async def measure_beside_dead_unit(
+    kind: Kind, args: argparse.Namespace, folder: Path, figures: Figures
+) -> None:
+    """Unit 1's poll period with the dead unit 2 in the config too."""
+    started = time.monotonic()
+    async with setup(kind, [UNIT, DEAD_UNIT], args.latency, folder) as (_, _, children, log):
+        await asyncio.sleep(DEAD_WARMUP)
+        start = time.monotonic()
+        await asyncio.sleep(args.seconds)
+        end = time.monotonic()
+        reads = marker_reads(log)
+    gap = mean_gap(reads, start, end)
+    if gap is None:  # not polled twice in the window: at least since its last poll
+        last = max((t for t in reads if t < end), default=started)
+        figures.dead_period = f"> {end - last:.0f} s"
+    else:
+        figures.dead_period = f"{gap:.2f} s"
+    figures.notes.append(f"{len(children)} process(es) in the dead-unit run")
 
 
 # --- report ------------------------------------------------------------------------------
