@@ -5,7 +5,10 @@ The only module that imports prometheus_client (an import-linter contract keeps 
 listens on ``config.host:config.port`` with a minimal HTTP server on the event loop
 (``GET /metrics``, also ``/``), and each scrape reads a fresh ``source()`` snapshot, on the
 loop's thread, so nothing is shared across threads. Plain Prometheus text by default,
-OpenMetrics when the scraper's Accept header asks for it. It stops listening (and drops
+OpenMetrics when the scraper's Accept header asks for it. ``GET /health`` is the container
+health check: 200 and ``{"status": "ok"}`` while no bus is down, 503 and the reason of
+each bus that is down (``{"status": "down", "buses": {"rs485": "rs485: cannot open
+/dev/ttyUSB0: Permission denied ..."}}``) otherwise. It stops listening (and drops
 open connections) when the block ends. An address that cannot be bound raises OSError
 naming it before anything else starts.
 
@@ -39,6 +42,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 from collections.abc import AsyncIterator, Callable, Iterator
 from operator import attrgetter
@@ -48,11 +52,14 @@ from prometheus_client.metrics_core import CounterMetricFamily, GaugeMetricFamil
 from prometheus_client.registry import CollectorRegistry
 
 from bridge.config import MetricsConfig
-from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot
+from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, buses_down
 
 log = logging.getLogger(__name__)
 REQUEST_TIMEOUT = 10.0  # a scraper that sends no request line within this is dropped
 PATHS = frozenset({"/", "/metrics"})
+HEALTH_PATH = "/health"
+_TEXT = "text/plain; charset=utf-8"
+
 Source = Callable[[], Snapshot]
 
 _BUS_COUNTERS: tuple[tuple[str, str, Callable[[BusSnapshot], float]], ...] = (
@@ -163,6 +170,7 @@ class MetricsServer:
     """Answers scrapes over HTTP on the event loop."""
 
     def __init__(self, source: Source) -> None:
+        self.source = source
         self.registry = CollectorRegistry()
         self.registry.register(SnapshotCollector(source))
         self._writers: set[asyncio.StreamWriter] = set()
@@ -170,11 +178,21 @@ class MetricsServer:
     def respond(self, method: str, target: str, accept: str) -> tuple[str, str, bytes]:
         """Status, content type and body for one request."""
         if method not in ("GET", "HEAD"):
-            return "405 Method Not Allowed", "text/plain; charset=utf-8", b"GET only\n"
-        if target.partition("?")[0] not in PATHS:
-            return "404 Not Found", "text/plain; charset=utf-8", b"metrics are on /metrics\n"
+            return "405 Method Not Allowed", _TEXT, b"GET only\n"
+        path = target.partition("?")[0]
+        if path == HEALTH_PATH:
+            return self.health()
+        if path not in PATHS:
+            return "404 Not Found", _TEXT, b"metrics are on /metrics, health on /health\n"
         encoder, content_type = choose_encoder(accept)
         return "200 OK", content_type, encoder(self.registry)
+
+    def health(self) -> tuple[str, str, bytes]:
+        """503 with each bus that is down and why, else 200."""
+        down = buses_down(self.source())
+        status = "503 Service Unavailable" if down else "200 OK"
+        document = {"status": "down", "buses": down} if down else {"status": "ok"}
+        return status, "application/json", json.dumps(document).encode() + b"\n"
 
     async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """One connection, one request, then close (HTTP/1.1 with Connection: close)."""

@@ -20,7 +20,9 @@ A counter lower than before (a device rebuilt with fresh counters) counts from z
           "timeouts": 3,               frames not answered in time
           "frame_errors": 0,           answers that could not be parsed (CRC, length)
           "exceptions": 2,             exception replies
-          "reopenings": 0              failed attempts to (re)open the port or connection
+          "reopenings": 0,             failed attempts to (re)open the port or connection
+          "error": null                while the port or connection is down: why (the
+                                         operating system's reason and what to do)
         }
       },
       "devices": {
@@ -69,6 +71,7 @@ class BusSnapshot:
     frame_errors: int = 0
     exceptions: int = 0
     reopenings: int = 0
+    down_reason: str | None = None  # set while the bus is down: why the last open failed
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,6 +154,12 @@ def build_health_report(current: Snapshot, previous: Snapshot | None = None) -> 
     }
 
 
+def buses_down(snapshot: Snapshot) -> dict[str, str]:
+    """The buses that are down, each with the reason (empty when every bus is up or has
+    not been opened yet): what the container health check reports."""
+    return {bus.bus_id: bus.down_reason for bus in snapshot.buses if bus.down_reason}
+
+
 class HealthReporter:
     """Keeps the previous snapshot so that each report covers the time since the last one."""
 
@@ -177,6 +186,7 @@ def _bus_report(bus: BusSnapshot, old: BusSnapshot | None, interval: float) -> d
         "frame_errors": bus.frame_errors,
         "exceptions": bus.exceptions,
         "reopenings": bus.reopenings,
+        "error": bus.down_reason,
     }
 
 

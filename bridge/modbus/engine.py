@@ -153,6 +153,7 @@ def bus_snapshot(scheduler: BusScheduler) -> BusSnapshot:
         frame_errors=counters.frame_errors,
         exceptions=counters.exceptions,
         reopenings=counters.reopenings,
+        down_reason=None if scheduler.transport.connected else scheduler.down_reason,
     )
 
 

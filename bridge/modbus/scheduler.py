@@ -111,6 +111,7 @@ class BusScheduler:
         self._unsolicited_logged = float("-inf")
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
+        self.down_reason: str | None = None  # why the last open failed, until one succeeds
 
     @property
     def bus_id(self) -> str:
@@ -378,6 +379,7 @@ class BusScheduler:
         except BusError as exc:
             if self._reopen_delay == 0:
                 log.warning("%s", exc, extra={"event": "bus_down", "bus": self.bus_id})
+            self.down_reason = str(exc)
             self.counters.reopenings += 1
             self._reopen_delay = min(REOPEN_MAX, max(REOPEN_INITIAL, self._reopen_delay * 2))
             self._reopen_at = time.monotonic() + self._reopen_delay
@@ -386,6 +388,7 @@ class BusScheduler:
             log.info("%s: bus back", self.bus_id, extra={"event": "bus_up", "bus": self.bus_id})
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
+        self.down_reason = None
 
 
 class _Resend(Exception):  # noqa: N818 - a signal inside the scheduler, never raised out

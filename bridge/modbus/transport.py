@@ -28,9 +28,11 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import grp
 import logging
 import os
 import re
+import stat
 import time
 from collections.abc import Callable
 
@@ -188,7 +190,43 @@ def _why(bus: SerialBus | TcpBus, raised: BaseException | None) -> str:
         return "the port opened on a second try; it may come and go"
     code = _errno(error)
     hint = _HINTS.get(code) if code is not None else None
+    if code in (errno.EACCES, errno.EPERM):
+        hint = _permission_hint(bus.port) or hint
     return _said(error) + (f" ({hint})" if hint else "")
+
+
+def _permission_hint(port: str) -> str | None:
+    """What to do about a port this process may not open: which group owns it and how to
+    join that group, on the host or in a container (where the host's group id counts)."""
+    try:
+        status = os.stat(port)
+    except OSError:
+        return None
+    try:
+        name = f" ({grp.getgrgid(status.st_gid).gr_name})"
+    except KeyError:  # a host group this system (the container) does not know by name
+        name = ""
+    return permission_hint(
+        status.st_gid, name, status.st_mode, os.getuid(), {os.getgid(), *os.getgroups()}
+    )
+
+
+def permission_hint(gid: int, name: str, mode: int, uid: int, groups: set[int]) -> str:
+    """The advice for a port owned by group ``gid`` (`` (dialout)`` as ``name``) with
+    permission bits ``mode``, refused to ``uid`` in ``groups``."""
+    group_rw = stat.S_IRGRP | stat.S_IWGRP
+    if gid in groups and mode & group_rw != group_rw:
+        return (
+            f"the port's group {gid}{name} may not read and write it (mode "
+            f"{stat.filemode(mode)}): a udev rule should make it 0660"
+        )
+    if gid in groups:
+        return f"uid {uid} is in the port's group {gid}{name}: check the mode and owner"
+    return (
+        f"the port belongs to group {gid}{name} and uid {uid} is not in it: add the user to "
+        f"that group; in a container pass the host's group id: --group-add {gid} "
+        f"(compose: group_add: ['{gid}'])"
+    )
 
 
 def _errno(error: BaseException) -> int | None:

@@ -359,3 +359,61 @@ def test_metrics_port_in_use_from_the_command_line(
     error = capsys.readouterr().err
     assert f"metrics endpoint: cannot listen on 127.0.0.1:{port}: address already in use" in error
     assert "Traceback" not in error
+
+
+def health_check(port: int) -> tuple[int, dict[str, Any]]:
+    """What the image's HEALTHCHECK sees on /health: the status code and the document."""
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=5) as answer:
+            return answer.status, json.loads(answer.read())
+    except urllib.error.HTTPError as refused:
+        return refused.code, json.loads(refused.read())
+
+
+@pytest.mark.asyncio
+async def test_health_says_a_bus_is_down_and_why_until_the_adapter_appears(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """A serial bus whose adapter is missing makes /health answer 503 with the reason
+    (and bridge/health carry it), while the TCP bus polls; once the adapter appears
+    (a pty linked at the configured path) the bus opens and /health answers 200."""
+    adapter = tmp_path / "ttyUSB0"
+    metrics_port = free_port()
+    async with (
+        observing(mosquitto, HEALTH) as observer,
+        serving_tcp(three_units()) as port,
+        harness.serving_serial(harness.simulator((1, "vacon_nx"))) as bridge_end,
+    ):
+        loaded = health_config(mosquitto.url, port, metrics={"enabled": True, "port": metrics_port})
+        serial = {"id": "rs485", "transport": "rtu", "port": str(adapter), "timeout": 0.3}
+        drive = {"id": "drive", "bus": "rs485", "unit": 1, "mapping": "vacon_nx",
+                 "poll": {"fast": 0.3, "slow": 5}}  # fmt: skip
+        data = loaded.config.model_dump(mode="json", exclude_none=True)
+        data["buses"].append(serial)
+        data["devices"].append(drive)
+        task = asyncio.create_task(Bridge(load_config_data(data, Path("health.yaml"))).run())
+        try:
+            await eventually(
+                lambda: latest(observer).get("buses", {}).get("rs485", {}).get("error"),
+                timeout=10,
+            )
+            status, document = await asyncio.to_thread(health_check, metrics_port)
+            assert status == 503
+            assert document["status"] == "down"
+            assert list(document["buses"]) == ["rs485"]  # the TCP bus is up
+            reason = document["buses"]["rs485"]
+            assert f"cannot open {adapter}" in reason
+            assert "No such file or directory" in reason and "plugged in" in reason
+            assert latest(observer)["buses"]["rs485"]["connected"] is False
+            assert latest(observer)["buses"]["tcp"]["error"] is None
+
+            adapter.symlink_to(bridge_end)  # the adapter is plugged in
+            await eventually(
+                lambda: latest(observer).get("buses", {}).get("rs485", {}).get("connected"),
+                timeout=20,
+            )
+            status, document = await asyncio.to_thread(health_check, metrics_port)
+            assert (status, document) == (200, {"status": "ok"})
+            assert latest(observer)["buses"]["rs485"]["error"] is None
+        finally:
+            await cancel(task)

@@ -14,6 +14,7 @@ from bridge.core.health_report import (
     Snapshot,
     WriteSnapshot,
     build_health_report,
+    buses_down,
     iso_utc,
 )
 
@@ -84,6 +85,7 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
                 "frame_errors": 1,
                 "exceptions": 3,
                 "reopenings": 1,
+                "error": None,
             }
         },
         "devices": {
@@ -230,6 +232,19 @@ def test_every_bus_and_device_by_id() -> None:
     assert document["buses"]["gw"]["transport"] == "rtu-over-tcp"
     assert list(document["devices"]) == ["pump", "meter"]
     assert document["devices"]["meter"]["bus"] == "gw"
+
+
+def test_a_bus_that_cannot_be_opened_says_why() -> None:
+    reason = "rs485: cannot open /dev/ttyUSB0: Permission denied [EACCES] (...)"
+    down = BusSnapshot("rs485", "rtu", connected=False, reopenings=3, down_reason=reason)
+    never_opened = BusSnapshot("gw", "tcp", connected=False)
+    snapshot = _snapshot(1010.0, buses=(down, never_opened, replace(BUS, bus_id="up")))
+    document = build_health_report(snapshot)
+    assert document["buses"]["rs485"]["error"] == reason
+    assert document["buses"]["gw"]["error"] is None  # not opened yet is not down
+    assert document["buses"]["up"]["error"] is None
+    assert buses_down(snapshot) == {"rs485": reason}
+    assert buses_down(_snapshot(1010.0)) == {}
 
 
 def test_snapshot_clock_conversion() -> None:
