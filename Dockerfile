@@ -1,12 +1,27 @@
 # modbus-mqtt-bridge container image.
 #
 #   docker build -t modbus-mqtt-bridge .
-#   docker run --rm -v "$PWD/deploy/config.yaml:/config/config.yaml:ro" \
-#       --device /dev/ttyUSB0 --group-add dialout modbus-mqtt-bridge
+#
+# Check a config, then run the bridge with it. config.yaml is your own file (start from
+# examples/rtu-serial.yaml or examples/tcp.yaml); the check needs neither the adapter nor
+# the broker:
+#
+#   docker run --rm --network none -v "$PWD/config.yaml:/config/config.yaml:ro" \
+#       modbus-mqtt-bridge check -c /config/config.yaml
+#   docker run -d --name modbus-bridge --restart unless-stopped --network host \
+#       -v "$PWD/config.yaml:/config/config.yaml:ro" \
+#       --device /dev/ttyUSB0 --group-add "$(stat -c %g /dev/ttyUSB0)" modbus-mqtt-bridge
+#
+# --network host lets the config's mqtt://127.0.0.1:1883 reach a broker on this host
+# (without it, 127.0.0.1 is the container itself: give the broker's LAN address instead,
+# mqtt://192.168.1.10:1883). --group-add gives the bridge the group that owns the adapter
+# on this host (dialout, gid 20 on Debian, Ubuntu and Raspberry Pi OS). docker-compose.yml
+# runs the bridge next to its own Mosquitto instead (deploy/config.yaml).
 #
 # Two stages on the same base image:
 #   build    builds the project wheel and collects the wheels of its dependencies, then
-#            installs exactly those wheels (no source tree, no index) into /opt/venv;
+#            installs exactly those wheels (no source tree, no index) into /opt/venv, a
+#            venv without pip or setuptools;
 #   runtime  python:3.11-slim plus that venv: no compiler, no build backend, no wheels,
 #            no source, running as an unprivileged user.
 # The venv is copied rather than built in place so that no wheel file stays behind in a
@@ -29,15 +44,19 @@ COPY mappings ./mappings
 
 # Every dependency is published as a wheel for linux/amd64 and linux/arm64, so no build
 # tools are needed; --only-binary makes a missing wheel fail loudly instead of compiling.
+# The venv gets no pip of its own (--without-pip): the base image's pip installs into it.
 RUN pip wheel --wheel-dir /wheels --only-binary=:all: --no-binary=modbus-mqtt-bridge . \
- && python -m venv /opt/venv \
- && /opt/venv/bin/pip install --no-index --find-links=/wheels modbus-mqtt-bridge \
+ && python -m venv --without-pip /opt/venv \
+ && pip --python /opt/venv/bin/python install --no-index --find-links=/wheels modbus-mqtt-bridge \
  && /opt/venv/bin/modbus-mqtt-bridge mappings list
 
 # --- runtime --------------------------------------------------------------------------
 FROM ${PYTHON_IMAGE} AS runtime
 
+# The package version (pyproject.toml; a test keeps them equal) and the base image, as
+# built (docker build --build-arg PYTHON_IMAGE=...).
 ARG VERSION=0.1.0
+ARG PYTHON_IMAGE
 LABEL org.opencontainers.image.title="modbus-mqtt-bridge" \
       org.opencontainers.image.description="Modbus RTU/TCP field devices to MQTT and Home Assistant: typed entities, safe writes, decoded alarms." \
       org.opencontainers.image.version="${VERSION}" \
@@ -45,7 +64,7 @@ LABEL org.opencontainers.image.title="modbus-mqtt-bridge" \
       org.opencontainers.image.source="https://github.com/modbus-mqtt-bridge/modbus-mqtt-bridge" \
       org.opencontainers.image.url="https://github.com/modbus-mqtt-bridge/modbus-mqtt-bridge" \
       org.opencontainers.image.documentation="https://github.com/modbus-mqtt-bridge/modbus-mqtt-bridge#readme" \
-      org.opencontainers.image.base.name="docker.io/library/python:3.11-slim"
+      org.opencontainers.image.base.name="${PYTHON_IMAGE}"
 
 # An unprivileged user in the dialout group, which owns serial devices (/dev/ttyUSB*,
 # /dev/ttyAMA*) on Debian-style hosts. A device passed with --device keeps the host's
@@ -59,11 +78,11 @@ COPY --from=build /opt/venv /opt/venv
 ENV PATH=/opt/venv/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     PYTHONDONTWRITEBYTECODE=1 \
-    BRIDGE_HEALTH_URL=http://127.0.0.1:9464/metrics
+    BRIDGE_HEALTH_URL=http://127.0.0.1:9464/health
 
-# The config file, your own mapping files (paths in the config are relative to it) and
-# the MQTT password file if you use one.
-VOLUME ["/config"]
+# Bind-mount the config file here (or a folder with it, your own mapping files, whose
+# paths in the config are relative to it, and the MQTT password file if you use one).
+# No VOLUME: an anonymous volume per container would hold nothing.
 WORKDIR /config
 # Numeric, so that runtimes can verify it is not root (Kubernetes runAsNonRoot); the
 # uid alone keeps the supplementary dialout group of the passwd entry.
@@ -72,16 +91,18 @@ USER 10001
 # Prometheus metrics (config bridge.metrics: {enabled: true, host: 0.0.0.0, port: 9464}).
 EXPOSE 9464
 
-# Health = the running bridge answers on its metrics endpoint. That endpoint is served on
-# the bridge's own event loop (bridge/metrics.py), so a crashed bridge or a blocked loop
-# fails the check, which `modbus-mqtt-bridge check` (a config validation) or a "PID 1
-# exists" test would not.
+# Health = the running bridge answers on its metrics endpoint, and no bus is down.
+# /health is served on the bridge's own event loop (bridge/metrics.py), so a crashed
+# bridge or a blocked loop fails the check, which `modbus-mqtt-bridge check` (a config
+# validation) or a "PID 1 exists" test would not; it answers 503 with the reason while a
+# bus is down (a serial port that cannot be opened, a gateway that does not answer), and
+# the check prints that reason (docker inspect shows it under .State.Health.Log).
 # It needs bridge.metrics.enabled: true in the config (host 127.0.0.1 is enough for the
 # check, 0.0.0.0 to let Prometheus scrape it); set BRIDGE_HEALTH_URL for another port.
 # Without metrics, turn the check off (compose: healthcheck: {disable: true}).
 # Plain python + urllib: the slim image has no curl or wget, and none is added.
 HEALTHCHECK --interval=30s --timeout=5s --start-period=30s --retries=3 \
-    CMD ["python", "-c", "import os, urllib.request; urllib.request.urlopen(os.environ['BRIDGE_HEALTH_URL'], timeout=4).read(1)"]
+    CMD ["python", "-c", "import os, sys, urllib.error, urllib.request\ntry:\n    urllib.request.urlopen(os.environ['BRIDGE_HEALTH_URL'], timeout=4).read()\nexcept urllib.error.HTTPError as refused:\n    sys.exit(refused.read().decode(errors='replace'))\nexcept OSError as failed:\n    sys.exit(f'no answer from the bridge: {failed}')"]
 
 ENTRYPOINT ["modbus-mqtt-bridge"]
 CMD ["run", "-c", "/config/config.yaml"]

@@ -7,10 +7,16 @@ where a compose binary is installed, with ``docker compose config`` itself.
 
 from __future__ import annotations
 
+import asyncio
 import json
+import os
 import re
+import shlex
 import shutil
+import socket
 import subprocess
+import sys
+import tomllib
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -18,15 +24,19 @@ from urllib.parse import urlsplit
 import pytest
 import yaml
 
+from bridge import __version__
 from bridge.cli import _parser
 from bridge.config import LoadedConfig, MetricsConfig, SerialBus, TcpBus, load_config
+from bridge.core.health_report import BusSnapshot, Snapshot
 from bridge.core.mapping import builtin_mapping_names
+from bridge.metrics import HEALTH_PATH, serve_metrics
 from bridge.simulate_cli import build_simulator
 
 ROOT = Path(__file__).resolve().parent.parent
 COMPOSE_FILE = ROOT / "docker-compose.yml"
 DOCKERFILE = ROOT / "Dockerfile"
 CONFIG_TARGET = "/config/config.yaml"
+CONFIG_FOLDER = "/config"
 BRIDGES = ("bridge", "bridge-demo")
 
 
@@ -48,12 +58,16 @@ def _active(profile: str | None) -> set[str]:
 
 
 def _mounted_config(service: dict[str, Any]) -> Path:
-    """The repository file a service mounts read-only at /config/config.yaml."""
-    mounts = [v.split(":") for v in service["volumes"] if v.split(":")[1] == CONFIG_TARGET]
-    assert len(mounts) == 1, service["volumes"]
-    source, _, mode = mounts[0]
+    """The repository file a service sees at /config/config.yaml: mounted read-only as
+    that file, or as config.yaml of a folder mounted read-only at /config."""
+    mounts = [v.split(":") for v in service["volumes"]]
+    files = [(source, mode) for source, target, mode in mounts if target == CONFIG_TARGET]
+    folders = [(source, mode) for source, target, mode in mounts if target == CONFIG_FOLDER]
+    assert len(files) + len(folders) == 1, service["volumes"]
+    source, mode = (files or folders)[0]
     assert mode == "ro"
-    return (ROOT / source).resolve()
+    path = (ROOT / source).resolve()
+    return path if files else path / "config.yaml"
 
 
 def _loaded(service: str) -> LoadedConfig:
@@ -71,11 +85,12 @@ def _simulate_args() -> Any:
 
 def test_services_and_profiles() -> None:
     services = _services()
-    assert set(services) == {"mosquitto", "bridge", "simulator", "bridge-demo"}
+    assert set(services) == {"mosquitto", "bridge", "simulator", "bridge-demo", "check"}
     assert services["mosquitto"]["image"] == "eclipse-mosquitto:2"
     assert services["bridge"]["profiles"] == ["hardware"]
     assert services["simulator"]["profiles"] == ["demo"]
     assert services["bridge-demo"]["profiles"] == ["demo"]
+    assert services["check"]["profiles"] == ["tools"]  # only by name: `run --rm check`
     # A plain `up` starts the broker only; each profile adds its own bridge, never both.
     assert _active(None) == {"mosquitto"}
     assert _active("demo") == {"mosquitto", "simulator", "bridge-demo"}
@@ -83,14 +98,15 @@ def test_services_and_profiles() -> None:
     # The demo never asks for a serial device, so it starts on any machine.
     assert all("devices" not in services[name] for name in _active("demo"))
     for name, service in services.items():
-        assert service["restart"] == "unless-stopped", name
+        assert service["restart"] == ("no" if name == "check" else "unless-stopped"), name
 
 
 def test_bridge_services_build_this_repository() -> None:
     services = _services()
-    images = {services[name]["image"] for name in ("bridge", "simulator", "bridge-demo")}
-    assert len(images) == 1  # one image, built once, for the three
-    for name in ("bridge", "simulator", "bridge-demo"):
+    built = ("bridge", "simulator", "bridge-demo", "check")
+    images = {services[name]["image"] for name in built}
+    assert len(images) == 1  # one image, built once, for all of them
+    for name in built:
         assert services[name]["build"] == ".", name
     assert services["bridge"]["depends_on"] == {"mosquitto": {"condition": "service_healthy"}}
     assert services["bridge-demo"]["depends_on"] == {
@@ -112,7 +128,8 @@ def test_mosquitto_config_is_mounted_and_listens_with_persistence() -> None:
     assert {"listener 1883", "persistence true", "persistence_location /mosquitto/data/"} <= lines
     assert "mosquitto-data:/mosquitto/data" in mosquitto["volumes"]
     assert "mosquitto-data" in _compose()["volumes"]
-    assert any(port.endswith(":1883") for port in mosquitto["ports"])
+    # The host side is configurable (another broker may hold 1883), loopback by default.
+    assert mosquitto["ports"] == ["${MQTT_BIND:-127.0.0.1}:${MQTT_PORT:-1883}:1883"]
 
 
 @pytest.mark.parametrize("service", BRIDGES)
@@ -131,7 +148,7 @@ def test_mounted_configs_exist_load_and_use_the_broker_service(service: str) -> 
 def test_hardware_bridge_opens_the_passed_through_serial_device() -> None:
     bridge = _services()["bridge"]
     assert bridge["devices"] == ["/dev/ttyUSB0:/dev/ttyUSB0"]
-    assert bridge["group_add"] == ["dialout"]
+    assert bridge["group_add"] == ["${SERIAL_GID:-dialout}"]  # the host's gid if not 20
     in_container = {entry.split(":")[1] for entry in bridge["devices"]}
     serial = [bus for bus in _loaded("bridge").config.buses if isinstance(bus, SerialBus)]
     assert serial
@@ -160,6 +177,35 @@ def test_demo_bridge_polls_exactly_what_the_simulator_serves() -> None:
     # The same device ids as examples/config.yaml: the HA dashboard and Node-RED flow fit.
     example = load_config(ROOT / "examples" / "config.yaml").config
     assert [d.id for d in loaded.config.devices] == [d.id for d in example.devices]
+
+
+def test_check_service_needs_no_adapter_no_broker_no_network() -> None:
+    """`docker compose run --rm check` works before the adapter is plugged in: it opens
+    no device, waits for no broker, and checks the file the hardware bridge runs."""
+    services = _services()
+    check = services["check"]
+    for key in ("devices", "depends_on", "ports", "group_add"):
+        assert key not in check, key
+    assert check["network_mode"] == "none"
+    assert check["healthcheck"] == {"disable": True}  # no metrics: it exits at once
+    assert check["volumes"] == services["bridge"]["volumes"]
+    assert _mounted_config(check) == ROOT / "deploy" / "config.yaml"
+    args = _parser().parse_args(check["command"])
+    assert (args.command, str(args.config)) == ("check", CONFIG_TARGET)
+
+
+def test_check_service_runs_the_real_check_on_the_mounted_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """What the check service prints for deploy/config.yaml, from this checkout: the
+    config and the mapping files it names load as the bridge would load them."""
+    from bridge.cli import main  # noqa: PLC0415
+
+    command = list(_services()["check"]["command"])
+    config = _mounted_config(_services()["check"])
+    command[command.index(CONFIG_TARGET)] = str(config)
+    assert main(command) == 0
+    assert f"{config}: ok (1 bus(es), 1 device(s)" in capsys.readouterr().out
 
 
 def test_compose_healthcheck_commands_are_valid_python() -> None:
@@ -198,6 +244,49 @@ def test_docker_compose_config_accepts_the_file(profile: str | None) -> None:
     assert result.returncode == 0, result.stderr
 
 
+def _published(port: Any) -> tuple[str, str, str]:
+    """(host ip, host port, container port) of a port as `compose config` prints it:
+    compose v1 keeps the short form, v2 the long one."""
+    if isinstance(port, dict):
+        return port.get("host_ip", ""), str(port["published"]), str(port["target"])
+    host_ip, published, target = str(port).split("/")[0].rsplit(":", 2)
+    return host_ip, published, target
+
+
+@pytest.mark.parametrize(
+    ("environment", "expected"),
+    [
+        ({}, ("127.0.0.1", "1883", "1883", "dialout")),
+        (
+            {"MQTT_PORT": "22884", "MQTT_BIND": "0.0.0.0", "SERIAL_GID": "986"},
+            ("0.0.0.0", "22884", "1883", "986"),
+        ),
+    ],
+    ids=["defaults", "from-the-environment"],
+)
+def test_broker_port_and_serial_group_come_from_the_environment(
+    environment: dict[str, str], expected: tuple[str, ...]
+) -> None:
+    """Another broker may hold 1883 on the host, and the host's dialout may not be gid 20:
+    MQTT_PORT, MQTT_BIND and SERIAL_GID (environment or .env) change them, as compose
+    itself resolves the file."""
+    command = _compose_command()
+    if command is None:
+        pytest.skip("neither docker-compose nor the docker compose plugin is installed")
+    clean = {
+        k: v for k, v in os.environ.items() if k not in ("MQTT_PORT", "MQTT_BIND", "SERIAL_GID")
+    }
+    result = subprocess.run(
+        [*command, "-f", str(COMPOSE_FILE), "--profile", "hardware", "config"],
+        capture_output=True, text=True, timeout=60, check=False, cwd=ROOT,
+        env=clean | environment,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    resolved = yaml.safe_load(result.stdout)["services"]
+    [port] = resolved["mosquitto"]["ports"]
+    assert (*_published(port), str(resolved["bridge"]["group_add"][0])) == expected
+
+
 # --- Dockerfile -----------------------------------------------------------------------------
 
 
@@ -228,15 +317,48 @@ def _one(stage: list[tuple[str, str]], instruction: str) -> str:
     return arguments
 
 
+def _args(stage: list[tuple[str, str]]) -> dict[str, str | None]:
+    """The ARG lines of a stage (or of the lines before the first FROM): name -> default."""
+    pairs = (arguments.partition("=") for name, arguments in stage if name == "ARG")
+    return {name: value if sep else None for name, sep, value in pairs}
+
+
+def _global_args() -> dict[str, str | None]:
+    rows = _instructions()
+    first_from = next(i for i, (name, _) in enumerate(rows) if name == "FROM")
+    return _args(rows[:first_from])
+
+
+def _header() -> str:
+    """The comment block at the top of the Dockerfile, as one text (continuations joined)."""
+    lines = []
+    for line in DOCKERFILE.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line.removeprefix("#").strip())
+    return re.sub(r"\\\n\s*", " ", "\n".join(lines))
+
+
+def header_commands() -> list[list[str]]:
+    """Every `docker run ...` of the header, split as the shell would split it."""
+    return [
+        shlex.split(line.strip())
+        for line in _header().splitlines()
+        if line.strip().startswith("docker run ")
+    ]
+
+
 def test_dockerfile_is_a_slim_two_stage_build() -> None:
-    args = dict(arguments.split("=", 1) for name, arguments in _instructions() if name == "ARG")
-    assert args["PYTHON_IMAGE"] == "python:3.11-slim"
+    assert _global_args()["PYTHON_IMAGE"] == "python:3.11-slim"
     build, runtime = _stages()
     assert _one(build, "FROM") == "${PYTHON_IMAGE} AS build"
     assert _one(runtime, "FROM") == "${PYTHON_IMAGE} AS runtime"
     build_steps = _one(build, "RUN")
     assert "pip wheel" in build_steps
     assert "--no-index --find-links=/wheels modbus-mqtt-bridge" in build_steps
+    # The venv the runtime gets has no pip or setuptools: the base image's pip fills it.
+    assert "python -m venv --without-pip /opt/venv" in build_steps
+    assert "pip --python /opt/venv/bin/python install" in build_steps
     # The runtime stage installs nothing: it copies the venv of wheels, no tools.
     runtime_text = " ".join(arguments for _, arguments in runtime)
     for tool in ("apt-get", "pip ", "gcc", "build-essential", "/wheels"):
@@ -244,7 +366,7 @@ def test_dockerfile_is_a_slim_two_stage_build() -> None:
     assert _one(runtime, "COPY") == "--from=build /opt/venv /opt/venv"
 
 
-def test_dockerfile_runtime_user_entrypoint_volume_labels() -> None:
+def test_dockerfile_runtime_user_entrypoint_labels_and_no_volume() -> None:
     runtime = _stages()[-1]
     user = _one(runtime, "USER")
     assert user.isdigit() and int(user) != 0  # numeric: runAsNonRoot can check it
@@ -253,14 +375,28 @@ def test_dockerfile_runtime_user_entrypoint_volume_labels() -> None:
     assert "--groups dialout" in useradd  # serial devices
     assert _one(runtime, "ENTRYPOINT") == '["modbus-mqtt-bridge"]'
     assert _one(runtime, "CMD") == f'["run", "-c", "{CONFIG_TARGET}"]'
-    assert _one(runtime, "VOLUME") == '["/config"]'
+    assert _one(runtime, "WORKDIR") == CONFIG_FOLDER
+    # The config is a bind mount: a VOLUME would leave an anonymous volume per container.
+    assert "VOLUME" not in {name for name, _ in _instructions()}
     labels = _one(runtime, "LABEL")
     for key in ("title", "description", "version", "licenses", "source"):
         assert f"org.opencontainers.image.{key}=" in labels, key
     assert 'licenses="MIT"' in labels
 
 
-def test_dockerfile_healthcheck_fetches_the_default_metrics_endpoint() -> None:
+def test_dockerfile_labels_follow_the_build_args_and_the_package_version() -> None:
+    runtime = _stages()[-1]
+    labels = _one(runtime, "LABEL")
+    args = _args(runtime)
+    # The base image label is the PYTHON_IMAGE the image was built from.
+    assert 'org.opencontainers.image.base.name="${PYTHON_IMAGE}"' in labels
+    assert "PYTHON_IMAGE" in args and args["PYTHON_IMAGE"] is None  # the global default
+    assert 'org.opencontainers.image.version="${VERSION}"' in labels
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    assert args["VERSION"] == project["project"]["version"] == __version__
+
+
+def test_dockerfile_healthcheck_asks_the_bridge_whether_a_bus_is_down() -> None:
     runtime = _stages()[-1]
     check = _one(runtime, "HEALTHCHECK")
     options, _, command = check.partition(" CMD ")
@@ -268,11 +404,84 @@ def test_dockerfile_healthcheck_fetches_the_default_metrics_endpoint() -> None:
     python, flag, code = json.loads(command)  # the exec form is a JSON list
     assert (python, flag) == ("python", "-c")
     compile(code, "HEALTHCHECK", "exec")
-    assert "urllib.request.urlopen(os.environ['BRIDGE_HEALTH_URL']" in code
     env = _one(runtime, "ENV")
     url = urlsplit(re.search(r"BRIDGE_HEALTH_URL=(\S+)", env).group(1))
-    assert (url.hostname, url.port, url.path) == ("127.0.0.1", MetricsConfig().port, "/metrics")
+    assert (url.hostname, url.port, url.path) == ("127.0.0.1", MetricsConfig().port, HEALTH_PATH)
     assert f"EXPOSE {MetricsConfig().port}" in {f"{n} {a}" for n, a in runtime}
+
+
+def healthcheck_code() -> str:
+    command = _one(_stages()[-1], "HEALTHCHECK").partition(" CMD ")[2]
+    return str(json.loads(command)[2])
+
+
+def run_healthcheck(url: str) -> subprocess.CompletedProcess[str]:
+    """The image's HEALTHCHECK command, as Docker runs it, against ``url``."""
+    return subprocess.run(
+        [sys.executable, "-c", healthcheck_code()],
+        env={**os.environ, "BRIDGE_HEALTH_URL": url},
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+
+
+@pytest.mark.asyncio
+async def test_healthcheck_fails_with_the_reason_while_a_bus_is_down() -> None:
+    """The HEALTHCHECK command against the bridge's real metrics server: exit 0 while the
+    buses are up, exit 1 printing the reason while one is down, exit 1 when nothing
+    answers (the bridge is gone)."""
+    reason = "rs485: cannot open /dev/ttyUSB0: Permission denied [EACCES] (...)"
+    up = BusSnapshot("rs485", "rtu", connected=True)
+    down = BusSnapshot("rs485", "rtu", connected=False, down_reason=reason)
+    current = [up]
+
+    def source() -> Snapshot:
+        return Snapshot(wall=0.0, monotonic=0.0, uptime=1.0, buses=(current[0],))
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    url = f"http://127.0.0.1:{port}{HEALTH_PATH}"
+    async with serve_metrics(MetricsConfig(enabled=True, port=port), source):
+        healthy = await asyncio.to_thread(run_healthcheck, url)
+        current[0] = down
+        unhealthy = await asyncio.to_thread(run_healthcheck, url)
+    gone = await asyncio.to_thread(run_healthcheck, url)
+    assert (healthy.returncode, healthy.stderr) == (0, "")
+    assert unhealthy.returncode == 1
+    assert json.loads(unhealthy.stderr) == {"status": "down", "buses": {"rs485": reason}}
+    assert gone.returncode == 1
+    assert gone.stderr.startswith("no answer from the bridge:")
+
+
+def test_header_examples_check_offline_and_run_against_a_reachable_broker() -> None:
+    """The header's `docker run` lines: a check that needs no network and no adapter, and
+    a run whose config (an example with mqtt://127.0.0.1) reaches a broker on the host,
+    never deploy/config.yaml (its broker name resolves on the compose network only)."""
+    header = _header()
+    assert "deploy/config.yaml:" not in header
+    check, run = header_commands()
+    image = "modbus-mqtt-bridge"
+    assert check[:3] == ["docker", "run", "--rm"]
+    assert check[check.index("--network") + 1] == "none"
+    assert "--device" not in check
+    at = check.index(image)
+    args = _parser().parse_args(check[at + 1 :])
+    assert (args.command, str(args.config)) == ("check", CONFIG_TARGET)
+    assert run[-1] == image  # the image's own CMD: run -c /config/config.yaml
+    assert run[run.index("--network") + 1] == "host"
+    assert run[run.index("--device") + 1] == "/dev/ttyUSB0"
+    assert run[run.index("--group-add") + 1] == "$(stat -c %g /dev/ttyUSB0)"
+    for command in (check, run):
+        source, target, mode = command[command.index("-v") + 1].split(":")
+        assert (source, target, mode) == ("$PWD/config.yaml", CONFIG_TARGET, "ro")
+    # The configs the header points at use a broker on this host: --network host fits.
+    for example in ("rtu-serial.yaml", "tcp.yaml"):
+        assert f"examples/{example}" in header
+        url = urlsplit(load_config(ROOT / "examples" / example).config.mqtt.url)
+        assert url.hostname == "127.0.0.1"
 
 
 def test_dockerignore_lets_through_exactly_what_the_build_copies() -> None:
