@@ -7,6 +7,7 @@ from bridge.mqtt.errors import (
     MqttError,
     MqttPublishError,
     MqttRefusedError,
+    MqttUnansweredError,
 )
 
 __all__ = [
@@ -17,5 +18,6 @@ __all__ = [
     "MqttError",
     "MqttPublishError",
     "MqttRefusedError",
+    "MqttUnansweredError",
     "run_with_reconnect",
 ]

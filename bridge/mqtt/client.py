@@ -2,10 +2,12 @@
 
 ``MqttClient`` is one broker session as an async context manager: entering connects
 (mqtt:// or mqtts://, user name and password, MQTT 5 with a fallback to 3.1.1 when the
-broker refuses 5), sets the Last Will ``offline`` (retained, QoS 1) on the will topic and
+broker refuses 5 or takes the connection but never answers an MQTT 5 CONNECT, as amqtt
+does), sets the Last Will ``offline`` (retained, QoS 1) on the will topic and
 publishes ``online`` there; leaving publishes ``offline`` and disconnects cleanly. Incoming
 messages are ``Message`` values, decoupled from paho. The caller owns the reconnect loop;
-``run_with_reconnect`` is that loop, with a capped exponential backoff.
+``run_with_reconnect`` is that loop, with a capped exponential backoff; once a broker
+needed the fallback, its reconnects ask for 3.1.1 at once.
 
 aiomqtt 2.5 drops paho's DUP flag when it wraps a message, so ``_Connection`` overrides
 aiomqtt's (private) ``_on_message`` hook to keep it; the pinned minor keeps that stable
@@ -53,6 +55,7 @@ from bridge.mqtt.errors import (
     MqttDisconnectedError,
     MqttPublishError,
     MqttRefusedError,
+    MqttUnansweredError,
 )
 
 ONLINE = b"online"
@@ -102,6 +105,19 @@ class _Connection(aiomqtt.Client):
         super().__init__(hostname, port, **options)
         self.collectors: dict[str, asyncio.Queue[_Received]] = {}
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
+        self.reached = False  # the socket (and TLS) connected and CONNECT was sent
+
+    def _client_connect(self) -> None:
+        super()._client_connect()
+        self.reached = True
+
+    def _on_disconnect(self, *args: Any, **kwargs: Any) -> None:
+        """A broker that closes the connection instead of answering the CONNECT (RabbitMQ
+        3.x does for MQTT 5) ends the wait at once; aiomqtt would wait out the timeout."""
+        if self.reached and not self._connected.done():
+            self._connected.set_exception(aiomqtt.MqttError("closed before CONNACK"))
+            return
+        super()._on_disconnect(*args, **kwargs)
 
     def _on_publish(
         self,
@@ -137,9 +153,15 @@ class MqttClient:
     """One broker session: ``async with MqttClient(config, will_topic=...) as client``."""
 
     def __init__(
-        self, config: MqttConfig, *, will_topic: str, client_id: str | None = None
+        self,
+        config: MqttConfig,
+        *,
+        will_topic: str,
+        client_id: str | None = None,
+        version: str | None = None,
     ) -> None:
         self._config = config
+        self._version = version or config.version  # a known 3.1.1 broker: no MQTT 5 try
         self._will_topic = will_topic
         self._client_id = client_id if client_id is not None else config.client_id
         self._connection: _Connection | None = None
@@ -159,21 +181,28 @@ class MqttClient:
             context = await asyncio.to_thread(_tls_context, self._config)
         except (OSError, ssl.SSLError) as exc:
             raise MqttConnectError(f"{url}: cannot load TLS files: {exc}") from exc
-        if self._config.version == "5":
+        if self._version == "5":
             try:
                 connection = await self._open(aiomqtt.ProtocolVersion.V5, context)
             except MqttConnectError as exc:
-                if exc.code != _UNSUPPORTED_PROTOCOL_VERSION:
+                if isinstance(exc, MqttUnansweredError):
+                    _log.info("%s does not answer an MQTT 5 CONNECT; trying 3.1.1", url)
+                elif exc.code == _UNSUPPORTED_PROTOCOL_VERSION:
+                    _log.info("%s does not speak MQTT 5; using 3.1.1", url)
+                else:
                     raise
-                _log.info("%s does not speak MQTT 5; using 3.1.1", url)
                 connection = await self._open(aiomqtt.ProtocolVersion.V311, context)
         else:
             connection = await self._open(aiomqtt.ProtocolVersion.V311, context)
         self._connection = connection
         try:
             await self.publish(self._will_topic, ONLINE, retain=True)
-        except MqttDisconnectedError:
+        except MqttDisconnectedError as exc:
             await self.__aexit__(None, None, None)
+            if self._config.qos == 2:  # the session's first QoS 2 publish
+                raise MqttDisconnectedError(
+                    f"{exc}; if the broker does not do QoS 2 (NATS before 2.10), set mqtt.qos: 1"
+                ) from exc
             raise
         return self
 
@@ -212,6 +241,10 @@ class MqttClient:
             if isinstance(exc, _RefusedByBroker):
                 code = exc.rc if isinstance(exc.rc, int) or exc.rc is None else exc.rc.value
                 raise MqttConnectError(f"{config.url} refused the connection: {exc}", code) from exc
+            if isinstance(exc, aiomqtt.MqttError) and connection.reached:
+                raise MqttUnansweredError(
+                    f"{config.url} took the connection but did not answer the CONNECT: {exc}"
+                ) from exc
             if isinstance(exc, aiomqtt.MqttError):
                 raise MqttConnectError(f"cannot connect to {config.url}: {exc}") from exc
             raise
@@ -423,11 +456,13 @@ async def run_with_reconnect(
     """
     backoff = backoff_initial
     outage: str | None = None
+    version: str | None = None  # what the broker answered last time
     while True:
         connected = False
         try:
-            async with MqttClient(config, will_topic=will_topic) as client:
+            async with MqttClient(config, will_topic=will_topic, version=version) as client:
                 connected = True
+                version = client.protocol
                 backoff = backoff_initial
                 if outage is not None:
                     _log.info(

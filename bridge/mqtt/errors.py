@@ -3,11 +3,13 @@
     BridgeError
     └── MqttError                   talking to the broker did not succeed
         ├── MqttConnectError        no session was established: the broker is unreachable,
-        │                           the TLS handshake or certificate check failed, or the
-        │                           broker refused the CONNECT (bad user name or password,
-        │                           not authorised, protocol); ``code`` is the MQTT 5 CONNACK
-        │                           reason code when the broker answered (3.1.1 codes are
-        │                           translated: 4 -> 134), else None
+        │   │                       the TLS handshake or certificate check failed, or the
+        │   │                       broker refused the CONNECT (bad user name or password,
+        │   │                       not authorised, protocol); ``code`` is the MQTT 5 CONNACK
+        │   │                       reason code when the broker answered (3.1.1 codes are
+        │   │                       translated: 4 -> 134), else None
+        │   └── MqttUnansweredError the broker took the connection but sent no CONNACK in
+        │                           time (or closed it): amqtt does so for MQTT 5
         ├── MqttDisconnectedError   an established session was lost (socket closed, keepalive
         │                           expired, broker restarted) or an operation on it timed out
         ├── MqttRefusedError        the broker answered a SUBSCRIBE with a failure code (an
@@ -34,6 +36,11 @@ class MqttConnectError(MqttError):
     def __init__(self, message: str, code: int | None = None) -> None:
         self.code = code
         super().__init__(message)
+
+
+class MqttUnansweredError(MqttConnectError):
+    """The connection was made and CONNECT sent, but no CONNACK came (a broker that
+    ignores or drops a CONNECT of a protocol version it does not speak)."""
 
 
 class MqttDisconnectedError(MqttError):

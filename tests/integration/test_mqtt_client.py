@@ -17,8 +17,10 @@ from bridge.mqtt import (
     MqttClient,
     MqttConnectError,
     MqttDisconnectedError,
+    MqttUnansweredError,
     run_with_reconnect,
 )
+from bridge.mqtt import client as client_module
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.mosquitto import Broker, TlsFiles
 
@@ -257,8 +259,9 @@ class StubBroker:
     On each SUBSCRIBE it answers SUBACK and then sends a QoS 1 PUBLISH with DUP set.
     """
 
-    def __init__(self, *, silent: bool = False) -> None:
+    def __init__(self, *, silent: bool = False, mqtt5: str = "refuse") -> None:
         self.silent = silent  # never answer CONNECT
+        self.mqtt5 = mqtt5  # an MQTT 5 CONNECT: "refuse" it, "ignore" it (amqtt), "close"
         self.levels: list[int] = []
         self.server: asyncio.Server | None = None
 
@@ -288,8 +291,10 @@ class StubBroker:
             kind = first & 0xF0
             if kind == 0x10:  # CONNECT: protocol name (2 + 4 bytes), then the level
                 self.levels.append(body[6])
-                if self.silent:
+                if self.silent or (body[6] == 5 and self.mqtt5 == "ignore"):
                     continue
+                if body[6] == 5 and self.mqtt5 == "close":
+                    return
                 if body[6] != 4:
                     writer.write(b"\x20\x02\x00\x01")  # unacceptable protocol version
                     await writer.drain()
@@ -328,6 +333,58 @@ async def test_falls_back_to_3_1_1_when_the_broker_refuses_5() -> None:
     async with stub as url, MqttClient(cfg(url, version="5"), will_topic=STATE) as client:
         assert client.protocol == "3.1.1"
     assert stub.levels == [5, 4]
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("mqtt5", ["ignore", "close"])
+async def test_falls_back_to_3_1_1_when_the_broker_never_answers_5(
+    mqtt5: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """amqtt takes an MQTT 5 CONNECT and never answers it (the CONNACK wait times out);
+    RabbitMQ 3.x closes the connection (no wait at all: the CONNACK timeout is made
+    endless here). Either way, no CONNACK on a connection that was made: try 3.1.1."""
+    monkeypatch.setattr(client_module, "_TIMEOUT", 0.5 if mqtt5 == "ignore" else 3600)
+    stub = StubBroker(mqtt5=mqtt5)
+    async with stub as url:
+        client = MqttClient(cfg(url, version="5"), will_topic=STATE)
+        await asyncio.wait_for(client.__aenter__(), timeout=30)
+        assert client.protocol == "3.1.1"
+        await client.__aexit__(None, None, None)
+    assert stub.levels == [5, 4]
+
+
+@pytest.mark.asyncio
+async def test_no_fallback_when_nothing_listens(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Nothing accepted the connection: that is not a protocol question (one attempt)."""
+    monkeypatch.setattr(client_module, "_TIMEOUT", 0.5)
+    stub = StubBroker()
+    url = await stub.__aenter__()
+    await stub.__aexit__()
+    with pytest.raises(MqttConnectError) as refused:
+        await MqttClient(cfg(url, version="5"), will_topic=STATE).__aenter__()
+    assert not isinstance(refused.value, MqttUnansweredError)
+
+
+@pytest.mark.asyncio
+async def test_reconnects_ask_for_3_1_1_once_the_broker_needed_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(client_module, "_TIMEOUT", 0.5)
+    stub = StubBroker(mqtt5="ignore")
+    sessions: list[str] = []
+
+    async def session(client: MqttClient) -> None:
+        sessions.append(client.protocol)
+        if len(sessions) == 1:
+            raise MqttDisconnectedError("lost")
+
+    async with stub as url:
+        config = cfg(url, version="5")
+        await asyncio.wait_for(
+            run_with_reconnect(config, STATE, session, backoff_initial=0.01), timeout=10
+        )
+    assert sessions == ["3.1.1", "3.1.1"]
+    assert stub.levels == [5, 4, 4]  # the second connect did not try 5 again
 
 
 @pytest.mark.asyncio
