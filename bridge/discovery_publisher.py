@@ -4,7 +4,11 @@ and limits read from registers), republished when those change, stale configs em
 ``DiscoveryPublisher.publish(client)`` sends the bridge device and every device; with
 ``only=device_id`` just that device, and only when its payload changed; with
 ``clear_stale`` the retained configs this bridge published before but no longer produces
-(a removed device or entity) are emptied first.
+(a removed device or entity) are emptied first. Those are found two ways: the retained
+configs under the discovery prefix that carry this bridge's identifiers, and the list of
+topics the last full publish recorded, retained on ``<base>/bridge/discovery``, which is
+read by its exact name: RabbitMQ sends no retained message to a subscription with a
+wildcard, so the first way finds nothing there.
 """
 
 from __future__ import annotations
@@ -114,10 +118,14 @@ class DiscoveryPublisher:
                 return  # nothing changed
             self._sent[device_id] = messages
             wanted.extend(messages)
+        current = sorted({m.topic for m in wanted})
         if clear_stale:
-            await self._clear_stale(client, {m.topic for m in wanted})
+            await self._clear_stale(client, set(current))
         for message in wanted:
             await client.publish(message.topic, message.payload, retain=True)
+        if clear_stale:
+            record = json.dumps(current).encode()
+            await client.publish(self.topics.bridge_discovery, record, retain=True)
 
     async def _clear_stale(self, client: MqttClient, current: set[str]) -> None:
         """Empty the retained configs this bridge published before but no longer produces."""
@@ -125,11 +133,28 @@ class DiscoveryPublisher:
         found: dict[str, bytes] = {}
         for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
             found |= await client.retained(pattern)
-        for topic, payload in found.items():
-            if topic not in current and payload and self._ours(payload):
-                log.info("removing stale discovery config %s", topic)
-                message = removal(topic)
-                await client.publish(message.topic, message.payload, retain=True)
+        stale = {t for t, payload in found.items() if payload and self._ours(payload)}
+        recorded = await client.retained(self.topics.bridge_discovery)
+        stale |= self._recorded(recorded.get(self.topics.bridge_discovery, b""))
+        for topic in sorted(stale - current):
+            log.info("removing stale discovery config %s", topic)
+            message = removal(topic)
+            await client.publish(message.topic, message.payload, retain=True)
+
+    def _recorded(self, payload: bytes) -> set[str]:
+        """The discovery config topics of a ``bridge/discovery`` record (others ignored)."""
+        try:
+            topics = json.loads(payload) if payload else []
+        except ValueError:
+            return set()
+        prefix = f"{self.topics.discovery_prefix}/"
+        if not isinstance(topics, list):
+            return set()
+        return {
+            t
+            for t in topics
+            if isinstance(t, str) and t.startswith(prefix) and t.endswith("/config")
+        }
 
     def _ours(self, payload: bytes) -> bool:
         try:

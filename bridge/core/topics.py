@@ -4,6 +4,7 @@
 <base>/bridge/devices            JSON list of devices (retained)
 <base>/bridge/info               version, config without secrets, schemas, mappings (retained)
 <base>/bridge/health             per bus and per device counters (periodic)
+<base>/bridge/discovery          JSON list of the discovery topics published (retained)
 <base>/bridge/request/<cmd>      management request: JSON with an optional transaction
 <base>/bridge/response/<cmd>     {status, data, error, transaction}
 <base>/<device>                  JSON of every value by key (retained)
@@ -59,6 +60,11 @@ class Topics:
     @property
     def bridge_health(self) -> str:
         return f"{self.base}/bridge/health"
+
+    @property
+    def bridge_discovery(self) -> str:
+        """The discovery topics this bridge published (to empty them once gone)."""
+        return f"{self.base}/bridge/discovery"
 
     @property
     def bridge_requests(self) -> str:
