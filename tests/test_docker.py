@@ -30,7 +30,9 @@ import yaml
 
 from bridge import __version__
 from bridge.core.mapping import builtin_mapping_names
+from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.mosquitto import Broker, free_port
+from tests.test_addon import TOKEN, FakeSupervisor, mqtt_answer, pump_options
 from tests.test_deploy import header_commands
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -277,10 +279,14 @@ def test_a_bridge_on_a_serial_port_of_another_group(
         docker("rm", "-f", "-v", name, check=False)
 
 
-def first_message(broker: Broker, topic: str, timeout: float = 20) -> bytes:
+def first_message(
+    broker: Broker, topic: str, timeout: float = 20, login: tuple[str, str] | None = None
+) -> bytes:
     """The first (retained) message on ``topic``, read by a plain paho client."""
     received: queue.Queue[bytes] = queue.Queue()
     client = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    if login is not None:
+        client.username_pw_set(*login)
     client.on_message = lambda _client, _userdata, message: received.put(message.payload)
     client.connect(broker.host, broker.port)
     client.subscribe(topic)
@@ -326,3 +332,72 @@ def test_compose_check_service_runs_without_the_adapter(image: str) -> None:
     finally:
         subprocess.run([*command, "-p", project, "down", "-v"], cwd=ROOT, capture_output=True,
                        timeout=120, check=False)  # fmt: skip
+
+
+# --- the Home Assistant add-on ---------------------------------------------------------------
+
+
+@pytest.fixture
+def modbus_tcp_pump(tmp_path: Path) -> Iterator[int]:
+    """The simulator serving a Nastec pump (unit 1) on a free loopback TCP port."""
+    port = free_port()
+    log = (tmp_path / "tcp-simulator.log").open("w+")
+    simulator = subprocess.Popen(
+        [sys.executable, "-m", "bridge.cli", "simulate", "--mapping", "nastec_vasco",
+         "--unit", "1", "--tcp", f"127.0.0.1:{port}"],
+        stdout=log, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 20
+        while "serving" not in (tmp_path / "tcp-simulator.log").read_text():
+            assert simulator.poll() is None and time.monotonic() < deadline, "no simulator"
+            time.sleep(0.1)
+        yield port
+    finally:
+        simulator.send_signal(signal.SIGTERM)
+        simulator.wait(10)
+        log.close()
+
+
+def test_the_addon_image_on_a_fake_supervisor(
+    image: str, mosquitto_auth: Broker, modbus_tcp_pump: int, tmp_path: Path
+) -> None:
+    """The add-on built FROM the image (as the Supervisor builds it, the base named by
+    BRIDGE_IMAGE), run as the Supervisor runs it: options in /data/options.json, the token
+    in SUPERVISOR_TOKEN. It asks the (fake) Supervisor for the broker, logs in with the
+    user and password it got, publishes the pump, and turns healthy."""
+    addon = f"{IMAGE}-addon"
+    docker(
+        "build", "--network", "host", "--build-arg", f"BRIDGE_IMAGE={image}", "-t", addon,
+        str(ROOT / "homeassistant-addon" / "modbus_mqtt_bridge"),
+    )  # fmt: skip
+    options = pump_options(modbus_tcp_pump)
+    (tmp_path / "options.json").write_text(json.dumps(options), encoding="utf-8")
+    (tmp_path / "options.json").chmod(0o644)
+    metrics_port = free_port()
+    name = f"pytest-addon-{os.getpid()}"
+    with FakeSupervisor(mqtt_answer(mosquitto_auth)) as supervisor:
+        docker(
+            "run", "-d", "--name", name, "--network", "host",
+            "--health-interval", "1s", "--health-start-period", "0s", "--health-retries", "1",
+            "-e", f"SUPERVISOR_TOKEN={TOKEN}", "-e", f"SUPERVISOR_API={supervisor.url}",
+            "-e", f"BRIDGE_HEALTH_URL=http://127.0.0.1:{metrics_port}/health",
+            "-v", f"{tmp_path / 'options.json'}:/data/options.json:ro", addon,
+        )  # fmt: skip
+        try:
+            wait_for_health(name, "healthy")
+            login = (BROKER_USER, BROKER_PASSWORD)
+            assert (
+                first_message(mosquitto_auth, "modbus/pump/availability", login=login) == b"online"
+            )
+            config = first_message(mosquitto_auth, "homeassistant/device/pump/config", login=login)
+            assert json.loads(config)["device"]["name"] == "Borehole pump"
+            logs = docker("logs", name)
+            assert (
+                f"broker mqtt://127.0.0.1:{mosquitto_auth.port} (from the Supervisor)"
+                in logs.stdout
+            )
+            assert supervisor.requests == [("/services/mqtt", f"Bearer {TOKEN}")]
+        finally:
+            docker("rm", "-f", "-v", name, check=False)
+            docker("rmi", addon, check=False)

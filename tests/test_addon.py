@@ -1,0 +1,448 @@
+"""The Home Assistant add-on (homeassistant-addon/): its files against the Supervisor's
+rules (tests/addon_rules.py), and its start script against a fake Supervisor HTTP API, a
+real Mosquitto with a password and the simulator: the broker and credentials come from
+the Supervisor's answer to ``GET /services/mqtt``, the buses and devices from the options,
+and the bridge it starts publishes discovery and state.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib.util
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import tomllib
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from types import ModuleType
+from typing import Any, ClassVar
+
+import pytest
+import yaml
+
+from bridge import __version__
+from bridge.config import MqttConfig, load_config_data
+from bridge.core.mapping import builtin_mapping_names
+from bridge.mqtt import MqttClient
+from tests.addon_rules import option_problems, problems
+from tests.conftest import BROKER_PASSWORD, BROKER_USER
+from tests.integration.harness import eventually, serving_tcp, simulator
+from tests.integration.mosquitto import Broker, free_port
+
+ROOT = Path(__file__).resolve().parent.parent
+REPOSITORY = ROOT / "homeassistant-addon"
+ADDON = REPOSITORY / "modbus_mqtt_bridge"
+RUN = ADDON / "run.py"
+TOKEN = "supervisor-token-for-the-test"
+
+
+def _yaml(path: Path) -> Any:
+    return yaml.safe_load(path.read_text(encoding="utf-8"))
+
+
+def addon_config() -> dict[str, Any]:
+    config: dict[str, Any] = _yaml(ADDON / "config.yaml")
+    return config
+
+
+# --- the files ------------------------------------------------------------------------------
+
+
+def test_config_follows_the_supervisor_rules() -> None:
+    assert problems(addon_config()) == []
+
+
+def test_the_rules_catch_what_the_supervisor_refuses() -> None:
+    """The checker is not a rubber stamp: each broken rule is named."""
+    config = addon_config()
+    broken = config | {
+        "arch": ["armv7", "amd64"],
+        "slug": "modbus bridge",
+        "services": ["mqtt:needed"],
+        "map": ["config:rx"],
+        "uart": "yes",
+        "webgui": "http://[HOST]:[PORT:80]",
+    }
+    broken["schema"] = config["schema"] | {"level": "integer", "deep": [{"a": [{"b": "str"}]}]}
+    broken["options"] = config["options"] | {
+        "log_level": "loud",
+        "buses": [{"id": "RS 485", "transport": "modbus", "stopbits": 3}],
+    }
+    del broken["name"]
+    found = "\n".join(problems(broken))
+    for expected in (
+        "name: required",
+        "webgui: not an add-on config key",
+        "uart: str instead of",
+        "arch: armv7 is not supported",
+        "slug: letters, digits",
+        "services: 'mqtt:needed'",
+        "map: 'config:rx'",
+        "schema.level: unknown type 'integer'",
+        "schema.deep.a: lists and dicts nest at most two deep",
+        "options.level: required",
+        "options.log_level: 'loud' is not",
+        "options.buses.0.id: 'RS 485' is not",
+        "options.buses.0.transport: 'modbus' is not",
+        "options.buses.0.stopbits: 3 is not int(1,2)?",
+    ):
+        assert expected in found, expected
+
+
+def test_config_declares_what_the_issue_asks() -> None:
+    config = addon_config()
+    assert config["services"] == ["mqtt:need"]  # the broker comes from the Supervisor
+    assert config["uart"] is True and config["usb"] is True  # serial adapters
+    assert sorted(config["arch"]) == ["aarch64", "amd64"]
+    assert config["slug"] == ADDON.name
+    assert "addon_config:ro" in config["map"] and "share:ro" in config["map"]
+    schema = config["schema"]
+    assert set(schema) == {"buses", "devices", "config_file", "base_topic",
+                           "discovery_prefix", "log_level"}  # fmt: skip
+    assert not any(key.startswith("mqtt") for key in schema)  # nobody types a broker
+
+
+def test_version_is_the_package_version_everywhere() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    version = project["project"]["version"]
+    assert addon_config()["version"] == version == __version__
+    dockerfile = (ADDON / "Dockerfile").read_text(encoding="utf-8")
+    [image] = re.findall(r"^ARG BRIDGE_IMAGE=(\S+)$", dockerfile, re.MULTILINE)
+    assert image == f"ghcr.io/modbus-mqtt-bridge/modbus-mqtt-bridge:{version}"
+    assert re.search(r"^FROM \$\{BRIDGE_IMAGE\}$", dockerfile, re.MULTILINE)
+    assert f"## {version}" in (ADDON / "CHANGELOG.md").read_text(encoding="utf-8")
+    # BUILD_FROM is what older Supervisors fill with their own Alpine base: not used
+    assert "BUILD_FROM" not in re.sub(r"#.*", "", dockerfile)
+    assert not (ADDON / "build.yaml").exists()  # Supervisor 2026.04 dropped it
+
+
+def test_dockerfile_runs_the_start_script_on_the_bridge_image() -> None:
+    lines = [
+        line.strip()
+        for line in (ADDON / "Dockerfile").read_text(encoding="utf-8").splitlines()
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    assert "COPY run.py /opt/addon/run.py" in lines
+    assert 'ENTRYPOINT ["python", "/opt/addon/run.py"]' in lines
+    assert "USER root" in lines
+    assert "HEALTHCHECK NONE" not in lines  # the image's health check stays
+
+
+def test_translations_name_every_option() -> None:
+    schema = addon_config()["schema"]
+    translated = _yaml(ADDON / "translations" / "en.yaml")["configuration"]
+    assert set(translated) == set(schema)
+    for key, entry in translated.items():
+        assert entry["name"] and entry["description"], key
+        nested = schema[key][0] if isinstance(schema[key], list) else None
+        if isinstance(nested, dict):
+            assert set(entry["fields"]) == set(nested), key
+            assert all(field["name"] for field in entry["fields"].values())
+
+
+def test_repository_and_store_files() -> None:
+    repository = _yaml(REPOSITORY / "repository.yaml")
+    assert set(repository) == {"name", "url", "maintainer"}
+    assert repository["url"].startswith("https://github.com/")
+    for name in ("DOCS.md", "README.md", "CHANGELOG.md"):
+        assert (ADDON / name).read_text(encoding="utf-8").startswith("# "), name
+    for name, size in (("icon.png", (128, 128)), ("logo.png", (250, 100))):
+        data = (ADDON / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n", name
+        width, height = int.from_bytes(data[16:20]), int.from_bytes(data[20:24])
+        assert (width, height) == size, name
+
+
+def test_default_options_and_docs_examples_fit_the_schema() -> None:
+    config = addon_config()
+    docs = re.findall(r"```yaml\n(.*?)```", (ADDON / "DOCS.md").read_text(encoding="utf-8"), re.S)
+    assert len(docs) == 3
+    for options in [config["options"], *(yaml.safe_load(block) for block in docs)]:
+        assert option_problems(options, config["schema"]) == [], options
+
+
+# --- the start script, imported -------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def run_module() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("addon_run", RUN)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+SERVICE = {"host": "core-mosquitto", "port": 1883, "ssl": False, "protocol": "3.1.1",
+           "username": "addons", "password": "s3cret", "addon": "core_mosquitto"}  # fmt: skip
+
+
+@pytest.mark.parametrize("block", [0, 1], ids=["rtu", "tcp"])
+def test_docs_examples_make_valid_bridge_configs(
+    run_module: ModuleType, block: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    docs = re.findall(r"```yaml\n(.*?)```", (ADDON / "DOCS.md").read_text(encoding="utf-8"), re.S)
+    data, base = run_module.bridge_config(yaml.safe_load(docs[block]), SERVICE)
+    monkeypatch.setenv(run_module.PASSWORD_ENV, "s3cret")
+    loaded = load_config_data(data, base / "config.yaml")
+    mqtt = loaded.config.mqtt
+    assert (mqtt.url, mqtt.username, mqtt.password_env) == (
+        "mqtt://core-mosquitto:1883", "addons", run_module.PASSWORD_ENV
+    )  # fmt: skip
+    assert "s3cret" not in json.dumps(data)
+    metrics = loaded.config.bridge.metrics
+    assert (metrics.enabled, metrics.host, metrics.port) == (True, "127.0.0.1", 9464)
+
+
+def test_a_config_file_keeps_its_settings_but_not_its_broker(
+    run_module: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """config_file mode: the file's topics, device options and own mapping file (a path
+    relative to the add-on's folder) are kept; its broker, user and TLS are the
+    Supervisor's."""
+    monkeypatch.setattr(run_module, "CONFIG_DIR", tmp_path)
+    shutil.copy(ROOT / "examples" / "mappings" / "energy_meter.yaml", tmp_path / "meter.yaml")
+    own = {
+        "mqtt": {"url": "mqtts://elsewhere:8883", "username": "me", "password": "other",
+                 "base_topic": "plant", "qos": 0, "tls": {"insecure": True}},
+        "bridge": {"health_interval": "30s"},
+        "buses": [{"id": "gw", "transport": "tcp", "host": "192.0.2.7"}],
+        "devices": [
+            {"id": "meter", "bus": "gw", "unit": 2, "mapping": "meter.yaml"},
+            {"id": "pump", "bus": "gw", "unit": 1, "mapping": "nastec_vasco",
+             "options": {"register_9f": "pcb_temperature"}},
+        ],
+    }  # fmt: skip
+    (tmp_path / "bridge.yaml").write_text(yaml.safe_dump(own), encoding="utf-8")
+    options = {"buses": [], "devices": [], "config_file": "bridge.yaml",
+               "base_topic": "modbus", "discovery_prefix": "homeassistant", "log_level": "info"}  # fmt: skip
+    data, base = run_module.bridge_config(options, SERVICE)
+    monkeypatch.setenv(run_module.PASSWORD_ENV, "s3cret")
+    config = load_config_data(data, base / "config.yaml").config
+    assert config.mqtt.url == "mqtt://core-mosquitto:1883"
+    assert (config.mqtt.username, config.mqtt.password, config.mqtt.tls) == ("addons", None, None)
+    assert (config.mqtt.base_topic, config.mqtt.qos) == ("plant", 0)  # the file's
+    assert config.mqtt.discovery_prefix == "homeassistant"  # the option, the file has none
+    assert config.bridge.health_interval == 30
+    assert config.devices[0].mapping == str(tmp_path / "meter.yaml")
+    assert config.devices[1].mapping == "nastec_vasco"
+    assert config.devices[1].options == {"register_9f": "pcb_temperature"}
+
+
+def test_ssl_broker_is_reached_over_mqtts(run_module: ModuleType) -> None:
+    service = SERVICE | {"ssl": True, "port": 8883}
+    section = run_module.mqtt_section(service, {})
+    assert section["url"] == "mqtts://core-mosquitto:8883"
+    assert section["tls"] == {"insecure": True}  # the certificate names the public host
+
+
+def test_buses_and_devices_in_both_places_are_refused(run_module: ModuleType) -> None:
+    options = {"config_file": "bridge.yaml", "devices": [{"id": "x"}], "buses": []}
+    with pytest.raises(run_module.AddonError, match="not both"):
+        run_module.bridge_config(options, SERVICE)
+
+
+# --- the start script against a fake Supervisor --------------------------------------------
+
+
+class FakeSupervisor:
+    """``GET /services/mqtt`` as the Supervisor answers it: 401 without the add-on's token,
+    then ``answer`` (status, JSON body). Records the requests."""
+
+    def __init__(self, answer: tuple[int, dict[str, Any]]) -> None:
+        self.answer = answer
+        self.requests: list[tuple[str, str | None]] = []
+        fake = self
+
+        class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"
+            server_version: ClassVar[str] = "fake-supervisor"  # type: ignore[misc]
+
+            def do_GET(self) -> None:
+                fake.requests.append((self.path, self.headers.get("Authorization")))
+                if self.headers.get("Authorization") != f"Bearer {TOKEN}":
+                    status, body = 401, {"result": "error", "message": "Unauthorized"}
+                elif self.path != "/services/mqtt":
+                    status, body = 404, {"result": "error", "message": "Not found"}
+                else:
+                    status, body = fake.answer
+                data = json.dumps(body).encode()
+                self.send_response(status)
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(data)))
+                self.end_headers()
+                self.wfile.write(data)
+
+            def log_message(self, *args: Any) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}"
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+
+    def __enter__(self) -> FakeSupervisor:
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def mqtt_answer(broker: Broker) -> tuple[int, dict[str, Any]]:
+    data = {"host": broker.host, "port": broker.port, "ssl": False, "protocol": "3.1.1",
+            "username": BROKER_USER, "password": BROKER_PASSWORD, "addon": "core_mosquitto"}  # fmt: skip
+    return 200, {"result": "ok", "data": data}
+
+
+NO_BROKER = (400, {"result": "error", "message": "Service not enabled"})
+
+
+@pytest.fixture
+def addon_dirs(tmp_path: Path) -> dict[str, Path]:
+    """/data, /config (the add-on's folder) and /tmp of an add-on container."""
+    dirs = {"data": tmp_path / "data", "config": tmp_path / "config", "tmp": tmp_path / "tmp"}
+    for folder in dirs.values():
+        folder.mkdir()
+    return dirs
+
+
+def start_script(
+    dirs: dict[str, Path],
+    options: dict[str, Any],
+    supervisor: FakeSupervisor | None,
+    *,
+    token: str | None = TOKEN,
+    metrics_port: int | None = None,
+) -> subprocess.Popen[str]:
+    (dirs["data"] / "options.json").write_text(json.dumps(options), encoding="utf-8")
+    env = {k: v for k, v in os.environ.items() if k not in ("SUPERVISOR_TOKEN",)}
+    env |= {
+        "ADDON_OPTIONS": str(dirs["data"] / "options.json"),
+        "ADDON_CONFIG_DIR": str(dirs["config"]),
+        "ADDON_GENERATED": str(dirs["tmp"] / "bridge.yaml"),
+        "SUPERVISOR_API": supervisor.url if supervisor else "http://127.0.0.1:9",
+        "BRIDGE_HEALTH_URL": f"http://127.0.0.1:{metrics_port or free_port()}/health",
+        "PATH": f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}",
+    }
+    if token is not None:
+        env["SUPERVISOR_TOKEN"] = token
+    return subprocess.Popen(
+        [sys.executable, str(RUN)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+
+
+def finished(process: subprocess.Popen[str]) -> tuple[int, str, str]:
+    out, err = process.communicate(timeout=30)
+    return process.returncode, out, err
+
+
+def pump_options(port: int = 5020) -> dict[str, Any]:
+    return {
+        "buses": [{"id": "gw", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port,
+                   "timeout": "0.5s"}],
+        "devices": [{"id": "pump", "name": "Borehole pump", "bus": "gw", "unit": 1,
+                     "mapping": "nastec_vasco", "poll_fast": "0.5s"}],
+        "base_topic": "modbus",
+        "discovery_prefix": "homeassistant",
+        "log_level": "info",
+    }  # fmt: skip
+
+
+@pytest.mark.asyncio
+async def test_the_addon_starts_the_bridge_on_the_supervisors_broker(
+    mosquitto_auth: Broker, addon_dirs: dict[str, Path]
+) -> None:
+    """No broker address anywhere in the options: the bridge logs in to the broker the
+    Supervisor names, with its user and password, and publishes the pump."""
+    sim = simulator((1, "nastec_vasco"))
+    observer_config = MqttConfig(url=mosquitto_auth.url, username=BROKER_USER,
+                                 password=BROKER_PASSWORD)  # type: ignore[arg-type]  # fmt: skip
+    with FakeSupervisor(mqtt_answer(mosquitto_auth)) as supervisor:
+        async with (
+            serving_tcp(sim) as port,
+            MqttClient(observer_config, will_topic="observer/state") as observer,
+        ):
+            seen: dict[str, bytes] = {}
+            await observer.subscribe("homeassistant/device/pump/config", "modbus/pump/availability")
+            process = start_script(addon_dirs, pump_options(port), supervisor)
+            try:
+
+                async def collect() -> None:
+                    async for message in observer.messages():
+                        seen[message.topic] = message.payload
+
+                task = asyncio.create_task(collect())
+                await eventually(lambda: seen.get("modbus/pump/availability") == b"online", 40)
+                task.cancel()
+            finally:
+                process.send_signal(signal.SIGTERM)
+                code, out, err = finished(process)
+    assert code == 0, err
+    assert f"broker mqtt://127.0.0.1:{mosquitto_auth.port} (from the Supervisor)" in out
+    assert supervisor.requests == [("/services/mqtt", f"Bearer {TOKEN}")]
+    assert json.loads(seen["homeassistant/device/pump/config"])["device"]["name"] == "Borehole pump"
+    written = (addon_dirs["tmp"] / "bridge.yaml").read_text(encoding="utf-8")
+    assert BROKER_PASSWORD not in written  # handed over in the environment only
+    assert yaml.safe_load(written)["mqtt"]["username"] == BROKER_USER
+
+
+def test_no_broker_in_home_assistant_says_what_to_install(addon_dirs: dict[str, Path]) -> None:
+    with FakeSupervisor(NO_BROKER) as supervisor:
+        code, _, err = finished(start_script(addon_dirs, pump_options(), supervisor))
+    assert code == 1
+    assert "no MQTT broker in Home Assistant (Service not enabled)" in err
+    assert "Mosquitto broker add-on" in err
+
+
+def test_a_wrong_token_is_a_refusal_not_a_retry(addon_dirs: dict[str, Path]) -> None:
+    with FakeSupervisor(NO_BROKER) as supervisor:
+        code, _, err = finished(start_script(addon_dirs, pump_options(), supervisor, token="x"))
+    assert code == 1
+    assert "HTTP 401 Unauthorized" in err
+    assert len(supervisor.requests) == 1
+
+
+def test_outside_home_assistant_there_is_no_token(addon_dirs: dict[str, Path]) -> None:
+    code, _, err = finished(start_script(addon_dirs, pump_options(), None, token=None))
+    assert code == 1
+    assert "SUPERVISOR_TOKEN is not set" in err
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        ({"devices": []}, "no devices yet"),
+        ({"devices": [pump_options()["devices"][0] | {"unit": 0}]}, "devices.pump.unit:"),
+        ({"devices": [pump_options()["devices"][0] | {"bus": "rs485"}]}, "devices.pump.bus:"),
+        ({"devices": [pump_options()["devices"][0] | {"mapping": "no_such.yaml"}]},
+         "/config/no_such.yaml: no shipped mapping of that name"),
+        ({"base_topic": "$SYS"}, "mqtt.base_topic:"),
+    ],
+    ids=["no-devices", "unit", "bus", "mapping", "topic"],
+)  # fmt: skip
+def test_bad_options_name_the_field_and_start_nothing(
+    addon_dirs: dict[str, Path], change: dict[str, Any], expected: str, mosquitto_auth: Broker
+) -> None:
+    with FakeSupervisor(mqtt_answer(mosquitto_auth)) as supervisor:
+        code, out, err = finished(start_script(addon_dirs, pump_options() | change, supervisor))
+    assert code == 2, err
+    assert expected in err
+    if "no devices" not in expected:
+        assert err.startswith("error: the add-on's options: 1 error(s)\n  "), err
+    assert not (addon_dirs["tmp"] / "bridge.yaml").exists()
+    assert "broker" not in out
+
+
+def test_every_shipped_mapping_is_offered_in_the_translations() -> None:
+    text = (ADDON / "translations" / "en.yaml").read_text(encoding="utf-8")
+    docs = (ADDON / "DOCS.md").read_text(encoding="utf-8")
+    for name in builtin_mapping_names():
+        assert name in text and name in docs, name
