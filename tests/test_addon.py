@@ -146,6 +146,21 @@ def test_translations_name_every_option() -> None:
             assert all(field["name"] for field in entry["fields"].values())
 
 
+def test_the_folder_is_an_add_on_repository_root() -> None:
+    """What the Supervisor does with a repository: repository.yaml at the root, and every
+    config.json/yaml/yml below (outside dot folders and rootfs) taken for an add-on. Here
+    that is exactly one, the add-on's."""
+    candidates = [p.relative_to(REPOSITORY) for p in REPOSITORY.glob("**/config.*")]
+    found = [
+        path
+        for path in candidates
+        if path.suffix in (".json", ".yaml", ".yml")
+        and not any(part.startswith(".") or part == "rootfs" for part in path.parts)
+    ]
+    assert found == [Path("modbus_mqtt_bridge/config.yaml")]
+    assert (REPOSITORY / "repository.yaml").is_file()
+
+
 def test_repository_and_store_files() -> None:
     repository = _yaml(REPOSITORY / "repository.yaml")
     assert set(repository) == {"name", "url", "maintainer"}

@@ -8,6 +8,7 @@ where a compose binary is installed, with ``docker compose config`` itself.
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 import json
 import os
 import re
@@ -16,6 +17,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import textwrap
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -26,7 +28,14 @@ import yaml
 
 from bridge import __version__
 from bridge.cli import _parser
-from bridge.config import LoadedConfig, MetricsConfig, SerialBus, TcpBus, load_config
+from bridge.config import (
+    LoadedConfig,
+    MetricsConfig,
+    SerialBus,
+    TcpBus,
+    load_config,
+    load_config_data,
+)
 from bridge.core.health_report import BusSnapshot, Snapshot
 from bridge.core.mapping import builtin_mapping_names
 from bridge.metrics import HEALTH_PATH, serve_metrics
@@ -37,6 +46,7 @@ COMPOSE_FILE = ROOT / "docker-compose.yml"
 DOCKERFILE = ROOT / "Dockerfile"
 CONFIG_TARGET = "/config/config.yaml"
 CONFIG_FOLDER = "/config"
+COMPOSE_SETTINGS = ("MQTT_PORT", "MQTT_BIND", "SERIAL_GID", "SERIAL_PORT")
 BRIDGES = ("bridge", "bridge-demo")
 
 
@@ -147,9 +157,9 @@ def test_mounted_configs_exist_load_and_use_the_broker_service(service: str) -> 
 
 def test_hardware_bridge_opens_the_passed_through_serial_device() -> None:
     bridge = _services()["bridge"]
-    assert bridge["devices"] == ["/dev/ttyUSB0:/dev/ttyUSB0"]
+    assert bridge["devices"] == ["${SERIAL_PORT:-/dev/ttyUSB0}:/dev/ttyUSB0"]
     assert bridge["group_add"] == ["${SERIAL_GID:-dialout}"]  # the host's gid if not 20
-    in_container = {entry.split(":")[1] for entry in bridge["devices"]}
+    in_container = {entry.rsplit(":", 1)[1] for entry in bridge["devices"]}
     serial = [bus for bus in _loaded("bridge").config.buses if isinstance(bus, SerialBus)]
     assert serial
     assert {bus.port for bus in serial} <= in_container
@@ -256,10 +266,21 @@ def _published(port: Any) -> tuple[str, str, str]:
 @pytest.mark.parametrize(
     ("environment", "expected"),
     [
-        ({}, ("127.0.0.1", "1883", "1883", "dialout")),
+        ({}, ("127.0.0.1", "1883", "1883", "dialout", "/dev/ttyUSB0:/dev/ttyUSB0")),
         (
-            {"MQTT_PORT": "22884", "MQTT_BIND": "0.0.0.0", "SERIAL_GID": "986"},
-            ("0.0.0.0", "22884", "1883", "986"),
+            {
+                "MQTT_PORT": "22884",
+                "MQTT_BIND": "0.0.0.0",
+                "SERIAL_GID": "986",
+                "SERIAL_PORT": "/dev/serial/by-id/usb-FTDI-if00-port0",
+            },
+            (
+                "0.0.0.0",
+                "22884",
+                "1883",
+                "986",
+                "/dev/serial/by-id/usb-FTDI-if00-port0:/dev/ttyUSB0",
+            ),
         ),
     ],
     ids=["defaults", "from-the-environment"],
@@ -267,15 +288,13 @@ def _published(port: Any) -> tuple[str, str, str]:
 def test_broker_port_and_serial_group_come_from_the_environment(
     environment: dict[str, str], expected: tuple[str, ...]
 ) -> None:
-    """Another broker may hold 1883 on the host, and the host's dialout may not be gid 20:
-    MQTT_PORT, MQTT_BIND and SERIAL_GID (environment or .env) change them, as compose
-    itself resolves the file."""
+    """Another broker may hold 1883 on the host, the host's dialout may not be gid 20, the
+    adapter has a stable by-id name: MQTT_PORT, MQTT_BIND, SERIAL_GID and SERIAL_PORT
+    (environment or .env) change them, as compose itself resolves the file."""
     command = _compose_command()
     if command is None:
         pytest.skip("neither docker-compose nor the docker compose plugin is installed")
-    clean = {
-        k: v for k, v in os.environ.items() if k not in ("MQTT_PORT", "MQTT_BIND", "SERIAL_GID")
-    }
+    clean = {k: v for k, v in os.environ.items() if k not in COMPOSE_SETTINGS}
     result = subprocess.run(
         [*command, "-f", str(COMPOSE_FILE), "--profile", "hardware", "config"],
         capture_output=True, text=True, timeout=60, check=False, cwd=ROOT,
@@ -284,7 +303,10 @@ def test_broker_port_and_serial_group_come_from_the_environment(
     assert result.returncode == 0, result.stderr
     resolved = yaml.safe_load(result.stdout)["services"]
     [port] = resolved["mosquitto"]["ports"]
-    assert (*_published(port), str(resolved["bridge"]["group_add"][0])) == expected
+    [device] = resolved["bridge"]["devices"]
+    device = device if isinstance(device, str) else f"{device['source']}:{device['target']}"
+    group = str(resolved["bridge"]["group_add"][0])
+    assert (*_published(port), group, device.removesuffix(":rwm")) == expected
 
 
 # --- Dockerfile -----------------------------------------------------------------------------
@@ -500,3 +522,105 @@ def test_dockerignore_lets_through_exactly_what_the_build_copies() -> None:
     assert copied == allowed
     for source in copied:
         assert (ROOT / source).exists(), source
+
+
+# --- README: the container, Home Assistant and broker sections --------------------------------
+
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def readme_section(title: str) -> str:
+    start = README.index(f"\n## {title}\n")
+    end = README.find("\n## ", start + 1)
+    return README[start : end if end > 0 else None]
+
+
+def indented_blocks(text: str) -> list[str]:
+    """The indented code blocks of a markdown text (in lists: 7 spaces), dedented."""
+    blocks = re.findall(r"(?:\n\n)((?: {4,}\S.*\n?)+)", text)
+    return [textwrap.dedent(block) for block in blocks]
+
+
+def test_readme_compose_commands_name_real_services_profiles_and_settings() -> None:
+    section = readme_section("Containers")
+    services = _services()
+    for command in re.findall(r"docker compose [^`\n)]*", section):
+        words = command.split()
+        for i, word in enumerate(words):
+            if word == "--profile":
+                assert any(words[i + 1] in s.get("profiles", []) for s in services.values())
+        if "run" in words:
+            assert words[words.index("run") + 2] in services, command  # run --rm SERVICE
+        if "logs" in words or "-q" in words:
+            assert words[-1] in services, command
+    compose_text = COMPOSE_FILE.read_text(encoding="utf-8")
+    for setting in set(re.findall(r"\b([A-Z][A-Z_]+)=", section)) - {"COMPOSE_PROFILES"}:
+        assert "${" + setting + ":-" in compose_text, setting
+    [env_file] = [b for b in indented_blocks(section) if "SERIAL_PORT=" in b]
+    settings = dict(line.split("=", 1) for line in env_file.split())
+    assert settings["COMPOSE_PROFILES"] in {
+        p for s in services.values() for p in s.get("profiles", [])
+    }
+
+
+def test_readme_docker_run_lines_are_the_dockerfile_header_lines() -> None:
+    section = re.sub(r"\\\n\s*", " ", readme_section("Containers"))
+    commands = [shlex.split(line.strip()) for line in section.splitlines()
+                if line.strip().startswith("docker run ")]  # fmt: skip
+    assert commands == header_commands()
+
+
+def _env_file_settings() -> dict[str, str]:
+    [env_file] = [b for b in indented_blocks(readme_section("Containers")) if "SERIAL_PORT=" in b]
+    return dict(line.split("=", 1) for line in env_file.split())
+
+
+def test_readme_env_file_resolves_with_compose() -> None:
+    command = _compose_command()
+    if command is None:
+        pytest.skip("neither docker-compose nor the docker compose plugin is installed")
+    settings = _env_file_settings()
+    clean = {k: v for k, v in os.environ.items() if k not in COMPOSE_SETTINGS}
+    result = subprocess.run(
+        [*command, "-f", str(COMPOSE_FILE), "config"],
+        capture_output=True, text=True, timeout=60, check=False, cwd=ROOT, env=clean | settings,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    bridge = yaml.safe_load(result.stdout)["services"]["bridge"]  # the profile is on
+    [device] = bridge["devices"]
+    source = device if isinstance(device, str) else device["source"]
+    assert str(source).startswith(settings["SERIAL_PORT"])
+
+
+def test_readme_home_assistant_section_installs_the_addon_it_describes() -> None:
+    from tests.addon_rules import option_problems  # noqa: PLC0415
+
+    section = readme_section("Home Assistant add-on")
+    addon = ROOT / "homeassistant-addon" / "modbus_mqtt_bridge"
+    [url] = re.findall(r"`(https://github\.com/\S+#\S+)`", section)
+    for document in (addon / "DOCS.md", ROOT / "homeassistant-addon" / "README.md"):
+        assert url in document.read_text(encoding="utf-8"), document
+    config = yaml.safe_load((addon / "config.yaml").read_text(encoding="utf-8"))
+    assert url.partition("#")[0] == config["url"]
+    [options_block] = [b for b in indented_blocks(section) if b.startswith("buses:")]
+    options = yaml.safe_load(options_block)
+    assert option_problems(options, config["schema"]) == []
+    # ... and the bridge takes what the add-on makes of them
+    spec = importlib.util.spec_from_file_location("addon_run", addon / "run.py")
+    assert spec is not None and spec.loader is not None
+    run = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(run)
+    service = {"host": "core-mosquitto", "port": 1883, "username": "addons"}
+    data, base = run.bridge_config(options, service)
+    loaded = load_config_data(data, base / "config.yaml").config
+    assert [d.mapping for d in loaded.devices] == ["nastec_vasco"]
+    for link in re.findall(r"\]\(([^)]+)\)", section):
+        assert (ROOT / link).exists(), link
+
+
+def test_readme_broker_section_links_the_table() -> None:
+    section = readme_section("MQTT brokers")
+    assert "(docs/brokers.md)" in section
+    table = (ROOT / "docs" / "brokers.md").read_text(encoding="utf-8")
+    for broker in ("Mosquitto", "NATS", "RabbitMQ", "amqtt"):
+        assert broker in section and broker in table
