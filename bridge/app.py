@@ -33,7 +33,7 @@ from bridge.core.discovery import (
 )
 from bridge.core.health_report import HealthReporter
 from bridge.core.management_request import response
-from bridge.core.state import plain_payload, published, state_document
+from bridge.core.state import compact, plain_payload, published, state_document
 from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
@@ -145,7 +145,7 @@ class Bridge:
                 "coalesced": counters.coalesced,
                 "dropped": self.dropped,
             }
-            await client.publish(self.topics.bridge_health, json.dumps(report), retain=False)
+            await client.publish(self.topics.bridge_health, compact(report), retain=False)
             await asyncio.sleep(interval)
 
     # --- state ------------------------------------------------------------------------
@@ -190,12 +190,14 @@ class Bridge:
         device_id = poller.device.id
         topics = self.topics
         mapping = poller.mapping
-        document = state_document(mapping, poller.points, poller.values)
-        if poller.values:
-            await client.publish(topics.device(device_id), json.dumps(document), retain=True)
-        for key in sorted(keys & set(published(poller.points))):
-            payload = plain_payload(poller.values.get(key))
-            await client.publish(topics.value(device_id, key), payload, retain=True)
+        output = self.mqtt.output
+        if poller.values and output != "values":
+            document = state_document(mapping, poller.points, poller.values)
+            await client.publish(topics.device(device_id), compact(document), retain=True)
+        if output != "json":
+            for key in sorted(keys & set(published(poller.points))):
+                payload = plain_payload(poller.values.get(key))
+                await client.publish(topics.value(device_id, key), payload, retain=True)
         availability = "online" if poller.health.online else "offline"
         if self._availability.get(device_id) != availability:
             self._availability[device_id] = availability
@@ -222,7 +224,7 @@ class Bridge:
             }
             for p in self.engine.devices.values()
         ]
-        await client.publish(self.topics.bridge_devices, json.dumps(listing), retain=True)
+        await client.publish(self.topics.bridge_devices, compact(listing), retain=True)
 
     # --- commands ---------------------------------------------------------------------
 

@@ -71,6 +71,15 @@ class MqttConfig(_Strict):
     version: Literal["5", "3.1.1"] = Field("5", description="MQTT 5, falls back to 3.1.1")
     keepalive: Duration = Field(60.0, ge=1, le=65535, description="MQTT keepalive, 1..65535 s")
     qos: Literal[0, 1, 2] = 1
+    output: Literal["json", "values", "both"] = Field(
+        "json",
+        description=(
+            "what a device publishes: its JSON document (<base>/<device>, what Home "
+            "Assistant and the Node-RED example read), a plain topic per value "
+            "(<base>/<device>/<key>), or both (about 1 + changed values messages per poll); "
+            "values alone needs discovery: off"
+        ),
+    )
     state_refresh: Duration = Field(300.0, gt=0, description="republish every value this often")
     command_expiry: Duration = Field(5.0, gt=0, description="drop commands not executed in time")
 
@@ -131,6 +140,15 @@ class MqttConfig(_Strict):
             raise ValueError(
                 "discovery_prefix and base_topic must not be equal or nested: the bridge's "
                 "commands and Home Assistant's discovery would share topics"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _discovery_reads_json(self) -> Self:
+        if self.output == "values" and self.discovery != "off":
+            raise ValueError(
+                "output: values publishes no device JSON, which Home Assistant's discovered "
+                "entities read; use output: json or both, or discovery: off"
             )
         return self
 

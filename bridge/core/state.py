@@ -57,6 +57,11 @@ def state_document(
     return document
 
 
+def compact(document: object) -> str:
+    """JSON without the spaces ``json.dumps`` puts after separators (fewer bytes)."""
+    return json.dumps(document, separators=(",", ":"))
+
+
 def plain_payload(value: Value) -> str:
     """The payload of ``<base>/<device>/<key>``."""
     if isinstance(value, str):

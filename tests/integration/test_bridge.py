@@ -213,7 +213,10 @@ async def test_commands_round_trip_and_refusals_write_nothing(mosquitto: Broker)
 @pytest.mark.asyncio
 async def test_get_reads_now(mosquitto: Broker) -> None:
     sim = all_units()
-    async with observing(mosquitto, "modbus/#") as observer, running_bridge(mosquitto, sim):
+    async with (
+        observing(mosquitto, "modbus/#") as observer,
+        running_bridge(mosquitto, sim, output="both"),
+    ):
         await eventually(
             lambda: observer.retained.get("modbus/soft_starter/availability") == b"online",
             timeout=20,
@@ -224,6 +227,38 @@ async def test_get_reads_now(mosquitto: Broker) -> None:
         await eventually(
             lambda: observer.retained.get("modbus/soft_starter/phase_u_current") == b"77"
         )
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize(
+    ("output", "discovery"), [("json", "device"), ("values", "off"), ("both", "device")]
+)
+async def test_output_chooses_the_device_json_the_plain_values_or_both(
+    mosquitto: Broker, output: str, discovery: str
+) -> None:
+    sim = all_units()
+    device = "soft_starter"
+    async with (
+        observing(mosquitto, "modbus/#") as observer,
+        running_bridge(mosquitto, sim, output=output, discovery=discovery) as bridge,
+    ):
+        poller = bridge.engine.devices[device]
+        await eventually(lambda: poller.values.get("phase_u_current") is not None, timeout=20)
+        sim.set_value(UNITS[device], "phase_u_current", 77)
+        await observer.client.publish(f"modbus/{device}/get", '{"phase_u_current": ""}')
+        plain = f"modbus/{device}/phase_u_current"
+        if output == "json":
+            await state_of(observer, device, "phase_u_current", 77)
+        else:
+            await eventually(lambda: observer.retained.get(plain) == b"77")
+        await asyncio.sleep(0.3)
+        values = [t for t in observer.retained if t.count("/") == 2 and "/bridge/" not in t]
+        kept = {t for t in values if not t.endswith(("/availability", "/get", "/error"))}
+        assert bool(kept) == (output != "json"), sorted(kept)[:5]
+        assert (f"modbus/{device}" in observer.retained) == (output != "values")
+        if output != "values":  # compact: no space after separators
+            assert b", " not in observer.retained[f"modbus/{device}"]
+            assert b'":' in observer.retained[f"modbus/{device}"]
 
 
 @pytest.mark.asyncio
