@@ -8,7 +8,9 @@ next to its bits. Field checks that need no other entity live here; cross-entity
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from enum import StrEnum
+from functools import cached_property
 from typing import Any, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -205,37 +207,45 @@ class Entity(BaseModel):
             overrides["ha"] = data.get("ha", {}) | overrides["ha"]
         return Entity.model_validate(data | overrides)
 
-    # --- derived facts -------------------------------------------------------------
+    # --- derived facts (computed once per entity: they are read on every decode) ------
 
-    @property
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Self:
+        """A copy whose derived facts are computed again (a copy with ``update`` would
+        otherwise keep the ones of the original)."""
+        copy = super().model_copy(update=update, deep=deep)
+        for name in _DERIVED:
+            copy.__dict__.pop(name, None)
+        return copy
+
+    @cached_property
     def data_type(self) -> DataType:
         if self.type is not None:
             return self.type
         return DataType.BOOL if self.table.is_bits else DataType.U16
 
-    @property
+    @cached_property
     def register_count(self) -> int:
         """Registers (or bits) the value spans on the wire."""
         if self.data_type is DataType.ASCII:
             return self.count or 1
         return _WIDTH.get(self.data_type, 1)
 
-    @property
+    @cached_property
     def field_width(self) -> int | None:
         """Bits of a bit/nibble field, or None for a whole value."""
         if self.bit is None:
             return None
         return self.width or 1
 
-    @property
+    @cached_property
     def readable(self) -> bool:
         return self.access is not Access.WRITE
 
-    @property
+    @cached_property
     def writable(self) -> bool:
         return self.access is not Access.READ
 
-    @property
+    @cached_property
     def kind(self) -> str:
         """What the decoded value is: ``bool``, ``enum``, ``text`` or ``number``."""
         if self.enum is not None:
@@ -246,7 +256,7 @@ class Entity(BaseModel):
             return "bool"
         return "number"
 
-    @property
+    @cached_property
     def component(self) -> Component:
         """The Home Assistant platform, from ``ha.component`` or derived from kind and access."""
         if self.ha.component is not None:
@@ -263,19 +273,19 @@ class Entity(BaseModel):
         table = writable if self.writable else readonly
         return table.get(self.kind, Component.SENSOR)
 
-    @property
+    @cached_property
     def poll_class(self) -> PollClass:
         if self.poll is not None:
             return self.poll
         return PollClass.SLOW if self.writable else PollClass.FAST
 
-    @property
+    @cached_property
     def enabled_by_default(self) -> bool:
         if self.ha.enabled is not None:
             return self.ha.enabled
         return self.confidence is not Confidence.LOW and self.ha.entity_category != "diagnostic"
 
-    @property
+    @cached_property
     def decimals(self) -> int:
         """Decimals of the engineering value: ``precision`` or those of scale and offset."""
         if self.precision is not None:
@@ -291,6 +301,20 @@ class Entity(BaseModel):
         if errors:
             raise ValueError("; ".join(errors))
         return self
+
+
+_DERIVED = (
+    "data_type",
+    "register_count",
+    "field_width",
+    "readable",
+    "writable",
+    "kind",
+    "component",
+    "poll_class",
+    "enabled_by_default",
+    "decimals",
+)
 
 
 def _decimals_of(number: float) -> int:

@@ -31,10 +31,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import heapq
 import itertools
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import IntEnum
 
 from bridge.core.health import exception_meaning
@@ -67,17 +68,20 @@ class Priority(IntEnum):
     POLL = 2
 
 
-@dataclass(order=True, slots=True)
+@dataclass(slots=True)
 class _Job:
     priority: int
     sequence: int
-    unit: int = field(compare=False)
-    request: Read | Write | WriteSequence = field(compare=False)
-    timeout: float = field(compare=False)
-    retries: int = field(compare=False)
-    protocol: Protocol = field(compare=False)
-    future: asyncio.Future[tuple[int, ...]] = field(compare=False)
-    deadline: float | None = field(default=None, compare=False)
+    unit: int
+    request: Read | Write | WriteSequence
+    timeout: float
+    retries: int
+    protocol: Protocol
+    future: asyncio.Future[tuple[int, ...]]
+    deadline: float | None = None
+
+
+_Entry = tuple[int, int, _Job]  # (priority, sequence, job): the heap's order
 
 
 @dataclass(slots=True)
@@ -100,7 +104,7 @@ class BusScheduler:
         self.gap = gap
         self.late_replies = late_replies  # True: replies carry no transaction id
         self.counters = BusCounters()
-        self._queue: list[_Job] = []
+        self._queue: list[_Entry] = []  # a heap: the most urgent job first
         self._sequence = itertools.count()
         self._wakeup = asyncio.Event()
         self._last_end = 0.0
@@ -148,9 +152,12 @@ class BusScheduler:
             future,
             deadline,
         )
-        self._queue.append(job)
-        self._wakeup.set()
+        self._push(job)
         return await future
+
+    def _push(self, job: _Job) -> None:
+        heapq.heappush(self._queue, (job.priority, job.sequence, job))
+        self._wakeup.set()
 
     async def run(self) -> None:
         """Serve jobs until cancelled; then every job still waiting (or cut short) is
@@ -168,7 +175,7 @@ class BusScheduler:
                 # write, a poll's next block) is queued before the next job is chosen
                 await asyncio.sleep(0)
         finally:
-            for job in in_flight + self._queue:
+            for job in in_flight + [entry[2] for entry in self._queue]:
                 if not job.future.done():
                     job.future.cancel()
             self.transport.close()
@@ -176,24 +183,43 @@ class BusScheduler:
     async def _next_job(self) -> _Job:
         """The most urgent job whose unit may be addressed now (waits for one if none)."""
         while True:
-            self._queue = sorted(j for j in self._queue if not j.future.done())
             now = time.monotonic()
             start = max(now, self._silent_from())
-            ready_at = [(self._unit_ready(job, start), job) for job in self._queue]
-            ready = [job for when, job in ready_at if when <= start]
-            if ready and start > now:
+            job, earliest = self._take_ready(start)
+            if job is not None and start > now:
+                self._push(job)
                 await asyncio.sleep(start - now)  # the silence first, then choose: a
                 continue  # command queued meanwhile goes before the polls
-            if ready:
-                self._queue.remove(ready[0])
-                return ready[0]
-            earliest = min((when for when, _ in ready_at), default=None)
+            if job is not None:
+                return job
             self._wakeup.clear()
             delay = None if earliest is None else max(0.0, earliest - now)
             # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancellation
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(delay):
                     await self._wakeup.wait()
+
+    def _take_ready(self, start: float) -> tuple[_Job | None, float | None]:
+        """Take the most urgent job that may go at ``start`` off the heap (jobs whose
+        submitter gave up are dropped; jobs of units that must still wait stay); else
+        None and when the first waiting unit is free."""
+        waiting: list[_Entry] = []
+        chosen: _Job | None = None
+        earliest: float | None = None
+        while self._queue:
+            entry = heapq.heappop(self._queue)
+            job = entry[2]
+            if job.future.done():
+                continue
+            when = self._unit_ready(job, start)
+            if when <= start:
+                chosen = job
+                break
+            waiting.append(entry)
+            earliest = when if earliest is None else min(earliest, when)
+        for entry in waiting:
+            heapq.heappush(self._queue, entry)
+        return chosen, earliest
 
     def _silent_from(self) -> float:
         """When the bus may carry the next frame: after the gap, after a timeout's quiet,
@@ -257,7 +283,7 @@ class BusScheduler:
         try:
             values = await self._attempt(job, job.request, first=True)
         except _Resend:
-            self._queue.append(job)
+            self._push(job)
             return
         except ModbusError as error:
             _settle(job, error)
