@@ -35,7 +35,8 @@ import contextlib
 import logging
 import socket
 import ssl
-from collections.abc import AsyncIterator, Awaitable, Callable
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Self
@@ -50,6 +51,7 @@ from paho.mqtt.reasoncodes import ReasonCode
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from bridge.config import MqttConfig, TlsConfig
+from bridge.core.backoff import ReconnectBackoff
 from bridge.mqtt.errors import (
     MqttConnectError,
     MqttDisconnectedError,
@@ -147,6 +149,24 @@ class _Connection(aiomqtt.Client):
     def abort(self) -> None:
         """Close a connection that never completed; paho's close also stops aiomqtt's tasks."""
         self._client._sock_close()
+
+    @property
+    def lost(self) -> bool:
+        """The broker connection ended (the socket closed, paho gave up on keepalive)."""
+        return self._disconnected.done()
+
+    def wake_on_loss(self) -> None:
+        """When the connection ends, wake whatever waits for an acknowledgement at once:
+        aiomqtt would leave it waiting for its whole timeout (10 s) after a broker died."""
+
+        def wake(_: asyncio.Future[None]) -> None:
+            for event in (*self._pending_publishes.values(), *self._pending_unsubscribes.values()):
+                event.set()
+            for future in self._pending_subscribes.values():
+                if not future.done():
+                    future.set_exception(aiomqtt.MqttError("connection lost"))
+
+        self._disconnected.add_done_callback(wake)
 
 
 class MqttClient:
@@ -249,6 +269,7 @@ class MqttClient:
                 raise MqttConnectError(f"cannot connect to {config.url}: {exc}") from exc
             raise
         _send_at_once(connection)
+        connection.wake_on_loss()
         self._protocol = "5" if protocol is aiomqtt.ProtocolVersion.V5 else "3.1.1"
         return connection
 
@@ -290,6 +311,16 @@ class MqttClient:
         except ValueError as exc:  # paho: an invalid topic, a payload beyond 256 MB
             raise MqttPublishError(f"cannot publish to {topic[:200]}: {exc}") from None
         _restore_lost_cancel()
+        if connection.lost:  # woken by the loss, not acknowledged
+            raise MqttDisconnectedError(f"publish to {topic[:200]}: connection lost")
+
+    async def publish_many(self, messages: Iterable[tuple[str, str | bytes, bool]]) -> None:
+        """Publish (topic, payload, retain) messages all at once and wait for every
+        acknowledgement together: a burst (the whole state after a reconnect) costs one
+        round trip, not one per message."""
+        async with asyncio.TaskGroup() as group:
+            for topic, payload, retain in messages:
+                group.create_task(self.publish(topic, payload, retain=retain))
 
     async def subscribe(self, *filters: str, qos: int = 1, live_only: bool = False) -> None:
         """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused.
@@ -441,20 +472,21 @@ async def run_with_reconnect(
     will_topic: str,
     session: Callable[[MqttClient], Awaitable[None]],
     *,
-    backoff_initial: float = 1.0,
-    backoff_max: float = 60.0,
+    backoff: ReconnectBackoff | None = None,
     on_state: Callable[[str], None] | None = None,
 ) -> None:
     """Run ``session`` on a connected client, reconnecting for as long as it takes.
 
     ``session`` is entered again on every connect, so it subscribes and republishes there.
-    After a failed connect or a lost session the loop sleeps ``backoff_initial`` seconds,
-    doubling up to ``backoff_max``, reset by a successful connect. ``on_state`` hears
-    ``"online"`` after each connect and ``"offline"`` when a session is lost. Returns
-    when ``session`` returns; any error other than MqttConnectError/MqttDisconnectedError
-    propagates. The outage is logged once when it starts and once when it ends.
+    After a failed connect or a lost session the loop waits as ``backoff`` says
+    (bridge/core/backoff.py: every 0.1-0.4 s while an outage is young, so the bridge is
+    back within half a second of a restarted broker, then doubling up to 30 s).
+    ``on_state`` hears ``"online"`` after each connect and ``"offline"`` when a session is
+    lost. Returns when ``session`` returns; any error other than
+    MqttConnectError/MqttDisconnectedError propagates. The outage is logged once when it
+    starts and once when it ends.
     """
-    backoff = backoff_initial
+    backoff = backoff or ReconnectBackoff()
     outage: str | None = None
     version: str | None = None  # what the broker answered last time
     while True:
@@ -463,7 +495,7 @@ async def run_with_reconnect(
             async with MqttClient(config, will_topic=will_topic, version=version) as client:
                 connected = True
                 version = client.protocol
-                backoff = backoff_initial
+                backoff.connected(time.monotonic())
                 if outage is not None:
                     _log.info(
                         "MQTT broker %s reachable again",
@@ -479,15 +511,15 @@ async def run_with_reconnect(
             reason = str(group.exceptions[0])
         if connected and on_state is not None:
             on_state("offline")
+        delay = backoff.failed(time.monotonic())
         if outage is None:
             _log.warning(
-                "MQTT: %s; retrying with backoff up to %gs",
+                "MQTT: %s; retrying every %.1f s or later",
                 reason,
-                backoff_max,
+                delay,
                 extra={"event": "mqtt_down", "broker": config.url},
             )
             outage = reason
         else:
             _log.debug("MQTT still unavailable: %s", reason)
-        await asyncio.sleep(backoff)
-        backoff = min(backoff * 2, backoff_max)
+        await asyncio.sleep(delay)

@@ -12,6 +12,7 @@ from typing import Any, TypeVar
 import pytest
 
 from bridge.config import MqttConfig, TlsConfig
+from bridge.core.backoff import ReconnectBackoff
 from bridge.mqtt import (
     Message,
     MqttClient,
@@ -217,7 +218,7 @@ async def test_run_with_reconnect_survives_a_broker_restart(mosquitto: Broker) -
             received.put_nowait(message)
 
     loop = run_with_reconnect(
-        cfg(mosquitto.url), STATE, session, backoff_initial=0.05, backoff_max=0.2,
+        cfg(mosquitto.url), STATE, session, backoff=ReconnectBackoff(initial=0.05, fast_max=0.2),
         on_state=states.append,
     )  # fmt: skip
     task = asyncio.ensure_future(loop)
@@ -259,9 +260,12 @@ class StubBroker:
     On each SUBSCRIBE it answers SUBACK and then sends a QoS 1 PUBLISH with DUP set.
     """
 
-    def __init__(self, *, silent: bool = False, mqtt5: str = "refuse") -> None:
+    def __init__(
+        self, *, silent: bool = False, mqtt5: str = "refuse", dies_on: bytes | None = None
+    ) -> None:
         self.silent = silent  # never answer CONNECT
         self.mqtt5 = mqtt5  # an MQTT 5 CONNECT: "refuse" it, "ignore" it (amqtt), "close"
+        self.dies_on = dies_on  # a PUBLISH to this topic is never acknowledged: the link dies
         self.levels: list[int] = []
         self.server: asyncio.Server | None = None
 
@@ -302,6 +306,9 @@ class StubBroker:
                 writer.write(b"\x20\x02\x00\x00")
             elif kind == 0x30 and first & 0x06:  # PUBLISH QoS>0: PUBACK its id
                 topic_length = int.from_bytes(body[0:2])
+                if body[2 : 2 + topic_length] == self.dies_on:
+                    await asyncio.sleep(0.2)
+                    return  # the broker died before acknowledging
                 writer.write(b"\x40\x02" + body[2 + topic_length : 4 + topic_length])
             elif kind == 0x80:  # SUBSCRIBE: SUBACK QoS 1, then a redelivered PUBLISH
                 writer.write(b"\x90\x03" + body[0:2] + b"\x01")
@@ -381,10 +388,23 @@ async def test_reconnects_ask_for_3_1_1_once_the_broker_needed_it(
     async with stub as url:
         config = cfg(url, version="5")
         await asyncio.wait_for(
-            run_with_reconnect(config, STATE, session, backoff_initial=0.01), timeout=10
+            run_with_reconnect(config, STATE, session, backoff=ReconnectBackoff(initial=0.01)),
+            timeout=10,
         )
     assert sessions == ["3.1.1", "3.1.1"]
     assert stub.levels == [5, 4, 4]  # the second connect did not try 5 again
+
+
+@pytest.mark.asyncio
+async def test_a_publish_waiting_for_its_ack_ends_when_the_broker_dies() -> None:
+    """aiomqtt alone waits its whole 10 s timeout for a PUBACK that cannot come any more."""
+    async with (
+        StubBroker(dies_on=b"t/lost") as url,
+        MqttClient(cfg(url, version="3.1.1"), will_topic=STATE) as client,
+    ):
+        async with asyncio.timeout(5):
+            with pytest.raises(MqttDisconnectedError, match="connection lost"):
+                await client.publish("t/lost", "x", qos=1)
 
 
 @pytest.mark.asyncio

@@ -1,0 +1,44 @@
+"""How long to wait between attempts to reach the MQTT broker. Pure.
+
+A broker restart (an upgrade, a container restart) is the common outage: the bridge must
+be back within a fraction of a second of the broker accepting connections, so for the
+first ``fast_window`` seconds of an outage it tries every ``initial`` seconds doubling up
+to ``fast_max`` (a refused connection costs next to nothing). A longer outage backs off,
+doubling up to ``slow_max``. The backoff starts over only after a good session (one that
+lasted ``good_session`` seconds): a broker that accepts and drops the bridge at once
+(a second client with the same id, an ACL) is not hammered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(slots=True)
+class ReconnectBackoff:
+    """The delay before each new attempt, from failures and sessions (times: monotonic s)."""
+
+    initial: float = 0.1
+    fast_max: float = 0.4
+    fast_window: float = 60.0
+    slow_max: float = 30.0
+    good_session: float = 10.0
+    _delay: float = 0.0
+    _outage_since: float | None = None
+    _connected_at: float | None = None
+
+    def connected(self, now: float) -> None:
+        """A session started."""
+        self._connected_at = now
+
+    def failed(self, now: float) -> float:
+        """An attempt failed or a session ended: the seconds to wait before the next one."""
+        if self._connected_at is not None and now - self._connected_at >= self.good_session:
+            self._delay, self._outage_since = 0.0, None  # after a good session: start over
+        self._connected_at = None
+        if self._outage_since is None:
+            self._outage_since = now
+        young = now - self._outage_since < self.fast_window
+        longest = self.fast_max if young else self.slow_max
+        self._delay = min(longest, self.initial if self._delay == 0 else 2 * self._delay)
+        return self._delay
