@@ -8,8 +8,8 @@ JSON, the changed plain values and its availability. Commands go through the dis
 (bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
 anything refused or failing goes to ``<base>/<device>/error``. Handling one message never
 waits for a device or a broker round trip, and no exception from one message leaves the
-message loop. Home Assistant's ``online`` asks for one republish (however many arrive
-while it waits). At most ``MAX_REQUESTS`` management requests run at a time.
+message loop. Home Assistant's ``online`` asks for one republish, half a second later
+(however many arrive meanwhile). At most ``MAX_REQUESTS`` management requests run at a time.
 Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
 optional metrics endpoint serves the same counters for the whole run, and the optional
 web page (bridge/web) shows the same values, health and refusals, fed by ``feed``.
@@ -18,6 +18,7 @@ web page (bridge/web) shows the same values, health and refusals, fed by ``feed`
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 from collections import deque
@@ -25,13 +26,13 @@ from collections.abc import Callable
 from typing import Any
 
 from bridge import __version__
-from bridge.config import LoadedConfig
+from bridge.config import LoadedConfig, MetricsConfig
 from bridge.core.commands import check_size, error_document
 from bridge.core.discovery import (
     Origin,
     Publish,
 )
-from bridge.core.health_report import HealthReporter
+from bridge.core.health_report import HealthReporter, Snapshot
 from bridge.core.management_request import response
 from bridge.core.state import compact, plain_payload, published, state_document
 from bridge.core.topics import Topics
@@ -39,14 +40,15 @@ from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
 from bridge.errors import ValueRejectedError
 from bridge.management import Management
-from bridge.metrics import serve_metrics
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
 from bridge.mqtt import Message, MqttClient, MqttError, MqttPublishError, run_with_reconnect
 from bridge.web import WebFeed, serve_web
 
 log = logging.getLogger(__name__)
+Outgoing = tuple[str, str, bool]  # topic, payload, retain
 OUTBOX = 200  # non-retained messages kept while the broker is away
+HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
 
 
@@ -82,13 +84,13 @@ class Bridge:
             loaded, self.engine, on_reload=self._reloaded, mqtt_state=lambda: self.mqtt_state
         )
         self._republish = False  # after a mapping reload: info, discovery and state
-        self._ha_online = False  # Home Assistant said online: discovery and state again
+        self._ha_online = asyncio.Event()  # Home Assistant said online: republish soon
 
     # --- running ----------------------------------------------------------------------
 
     async def run(self) -> None:
         """Run until cancelled."""
-        metrics = serve_metrics(self.loaded.config.bridge.metrics, self.engine.snapshot)
+        metrics = _metrics(self.loaded.config.bridge.metrics, self.engine.snapshot)
         web = serve_web(self.loaded.config.bridge.web, self)
         async with metrics, web, asyncio.TaskGroup() as group:
             self._group = group
@@ -110,12 +112,13 @@ class Bridge:
         await client.subscribe(*commands, qos=max(1, self.mqtt.qos), live_only=True)
         await client.subscribe(topics.ha_status, qos=max(1, self.mqtt.qos))
         await self._publish_info(client)
+        await self._publish_everything(client)  # values first: one burst, one round trip
         await self.discovery.publish(client, clear_stale=True)
-        await self._publish_everything(client)
         try:
             async with asyncio.TaskGroup() as group:
                 group.create_task(self._publisher(client))
                 group.create_task(self._refresher(client))
+                group.create_task(self._home_assistant_returns(client))
                 group.create_task(self._health_reports(client))
                 async for message in client.messages():
                     self._handle(message)
@@ -127,6 +130,17 @@ class Bridge:
             await self._wake.wait()
             self._wake.clear()
             await self._flush(client)
+
+    async def _home_assistant_returns(self, client: MqttClient) -> None:
+        """Discovery and state again after Home Assistant says ``online``: once per
+        ``HA_SETTLE`` seconds however many come (a flood of ``online`` is one republish)."""
+        while True:
+            await self._ha_online.wait()
+            await asyncio.sleep(HA_SETTLE)
+            self._ha_online.clear()
+            log.info("Home Assistant is online: publishing discovery and state again")
+            await self.discovery.publish(client)
+            await self._publish_everything(client)
 
     async def _refresher(self, client: MqttClient) -> None:
         while True:
@@ -157,20 +171,20 @@ class Bridge:
 
     async def _flush(self, client: MqttClient) -> None:
         if self._republish:  # after a mapping reload: new entities, new discovery
-            self._republish = self._ha_online = False
+            self._republish = False
+            self._ha_online.clear()
             await self._publish_info(client)
             await self.discovery.publish(client, clear_stale=True)
             await self._publish_everything(client)
-        if self._ha_online:  # however many "online" came meanwhile: once
-            self._ha_online = False
-            log.info("Home Assistant is online: publishing discovery and state again")
-            await self.discovery.publish(client)
-            await self._publish_everything(client)
         dirty, self._dirty = self._dirty, {}
+        burst: list[Outgoing] = []
         devices_changed = False
         for device_id, keys in dirty.items():
             poller = self.engine.devices[device_id]
-            devices_changed |= await self._publish_device(client, poller, keys)
+            devices_changed |= self._device_messages(poller, keys, burst)
+        await client.publish_many(burst)
+        for device_id, keys in dirty.items():
+            poller = self.engine.devices[device_id]
             if keys & self.discovery.sources(poller):
                 await self.discovery.publish(client, only=device_id)
         if devices_changed:
@@ -182,33 +196,32 @@ class Bridge:
             except MqttPublishError as exc:
                 log.warning("%s", exc)
 
-    async def _publish_device(
-        self, client: MqttClient, poller: DevicePoller, keys: set[str]
-    ) -> bool:
-        """Publish a device's JSON, changed plain values and availability; True if the
-        availability changed."""
+    def _device_messages(self, poller: DevicePoller, keys: set[str], burst: list[Outgoing]) -> bool:
+        """Add a device's JSON, changed plain values and availability (when it changed) to
+        ``burst``; True if the availability changed."""
         device_id = poller.device.id
         topics = self.topics
-        mapping = poller.mapping
         output = self.mqtt.output
         if poller.values and output != "values":
-            document = state_document(mapping, poller.points, poller.values)
-            await client.publish(topics.device(device_id), compact(document), retain=True)
+            document = state_document(poller.mapping, poller.points, poller.values)
+            burst.append((topics.device(device_id), compact(document), True))
         if output != "json":
             for key in sorted(keys & set(published(poller.points))):
                 payload = plain_payload(poller.values.get(key))
-                await client.publish(topics.value(device_id, key), payload, retain=True)
+                burst.append((topics.value(device_id, key), payload, True))
         availability = "online" if poller.health.online else "offline"
         if self._availability.get(device_id) != availability:
             self._availability[device_id] = availability
-            await client.publish(topics.availability(device_id), availability, retain=True)
+            burst.append((topics.availability(device_id), availability, True))
             return True
         return False
 
     async def _publish_everything(self, client: MqttClient) -> None:
         self._availability.clear()
+        burst: list[Outgoing] = []
         for poller in self.engine.devices.values():
-            await self._publish_device(client, poller, set(published(poller.points)))
+            self._device_messages(poller, set(published(poller.points)), burst)
+        await client.publish_many(burst)
         await self._publish_devices_list(client)
 
     async def _publish_devices_list(self, client: MqttClient) -> None:
@@ -242,8 +255,7 @@ class Bridge:
             return
         if message.topic == self.topics.ha_status:
             if message.payload.strip() == b"online":
-                self._ha_online = True
-                self._wake.set()
+                self._ha_online.set()
             return
         target = self.topics.parse_command(message.topic)
         if target is not None:
@@ -317,6 +329,18 @@ class Bridge:
         log.info("%s refused: %s", device_id[:100], payload)
         self._queue(Publish(self.topics.error(device_id), payload, retain=False))
         self.feed.refused_command(device_id, payload)
+
+
+def _metrics(
+    config: MetricsConfig, source: Callable[[], Snapshot]
+) -> contextlib.AbstractAsyncContextManager[None]:
+    """The metrics endpoint while the bridge runs, if enabled (prometheus_client is loaded
+    only then: it costs memory ``run`` does not otherwise need)."""
+    if not config.enabled:
+        return contextlib.nullcontext()
+    from bridge.metrics import serve_metrics  # noqa: PLC0415
+
+    return serve_metrics(config, source)
 
 
 async def _guarded(work: Any, failed: Callable[[str], None] | None) -> None:

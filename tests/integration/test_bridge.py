@@ -141,7 +141,9 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
                 ),
                 timeout=20,
             )
-            config = observer.json(f"homeassistant/device/{name}/config")
+            topic = f"homeassistant/device/{name}/config"
+            await eventually(lambda t=topic: t in observer.retained)  # after the values
+            config = observer.json(topic)
             assert config["device"]["identifiers"] == [f"modbus_{name}"]
             assert config["origin"]["name"] == "modbus-mqtt-bridge"
             assert config["availability_mode"] == "all"
