@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib
 import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
-from bridge import __version__, commission_cli, demo, simulate_cli
+from bridge import __version__
 from bridge.config import config_schema, load_config
 from bridge.core.address import format_address
 from bridge.core.entity import Entity
@@ -34,8 +35,9 @@ EXIT_FAILED = 1
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
-    parser = _parser()
-    args = parser.parse_args(argv)
+    arguments = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser(_command_of(arguments))
+    args = parser.parse_args(arguments)
     try:
         return int(args.handler(args, sys.stdout))
     except InputError as exc:
@@ -46,7 +48,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILED
 
 
-def _parser() -> argparse.ArgumentParser:
+# Subcommands whose modules load what ``run`` never needs (rich, the simulator, the
+# embedded demo broker): their parsers are built only when one of them is asked for (or
+# for help and errors, which list every command), so ``run`` keeps none of it in memory.
+_LAZY = {  # command: (module, the function that adds its parser)
+    "simulate": ("bridge.simulate_cli", "add_parser"),
+    "scan": ("bridge.commission_cli", "add_parsers"),
+    "read": ("bridge.commission_cli", "add_parsers"),
+    "write": ("bridge.commission_cli", "add_parsers"),
+    "demo": ("bridge.demo", "add_parser"),
+}
+
+
+def _command_of(arguments: Sequence[str]) -> str | None:
+    return next((a for a in arguments if not a.startswith("-")), None)
+
+
+def _parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line; with ``command`` given and not one of ``_LAZY``, without the
+    lazy subcommands."""
     parser = argparse.ArgumentParser(
         prog="modbus-mqtt-bridge",
         description="Modbus RTU/TCP devices to MQTT and Home Assistant.",
@@ -86,10 +106,14 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("-c", "--config", type=Path, required=True, metavar="FILE")
     add_logging_arguments(run)
     run.set_defaults(handler=_run)
-    simulate_cli.add_parser(commands)
-    commission_cli.add_parsers(commands)
-    demo.add_parser(commands)
+    eager = command is not None and command in _EAGER
+    wanted = [] if eager else [_LAZY[command]] if command in _LAZY else list(_LAZY.values())
+    for module, function in dict.fromkeys(wanted):
+        getattr(importlib.import_module(module), function)(commands)
     return parser
+
+
+_EAGER = ("check", "schema", "mappings", "run")
 
 
 def _run(args: argparse.Namespace, _: TextIO) -> int:
