@@ -4,7 +4,7 @@ and limits read from registers), republished when those change, stale configs em
 ``DiscoveryPublisher.publish(client)`` sends the bridge device and every device; with
 ``only=device_id`` just that device, and only when its payload changed; with
 ``clear_stale`` the retained configs this bridge published before but no longer produces
-(a removed device or entity) are emptied first. Those are found two ways: the retained
+(a removed device or entity) are emptied after. Those are found two ways: the retained
 configs under the discovery prefix that carry this bridge's identifiers, and the list of
 topics the last full publish recorded, retained on ``<base>/bridge/discovery``, which is
 read by its exact name: RabbitMQ sends no retained message to a subscription with a
@@ -48,7 +48,7 @@ class DiscoveryPublisher:
         self.origin = origin
         self._mqtt = loaded.config.mqtt
         self._health_interval = loaded.config.bridge.health_interval
-        self._sent: dict[str, list[Publish]] = {}
+        self._sent: dict[str, int] = {}  # device -> digest of its configs as sent
 
     def forget(self, device_id: str) -> None:
         """Build the device's discovery afresh next time (its mapping changed)."""
@@ -99,40 +99,47 @@ class DiscoveryPublisher:
     async def publish(
         self, client: MqttClient, *, clear_stale: bool = False, only: str | None = None
     ) -> None:
+        """Publish the bridge's and every device's configs (``only``: that device's, and
+        only if they changed). Device by device, remembering a digest of what went out,
+        not the payloads (about 26 kB per device)."""
         if self._mqtt.discovery == "off":
             return
-        health = self._health_interval > 0  # the sensors read it
-        bridge_messages = build_bridge_discovery(
-            self.topics,
-            self.origin,
-            self.topics.base,
-            buses=list(self.engine.schedulers) if health else [],
-            devices=list(self.engine.devices) if health else [],
-        )
-        wanted: list[Publish] = [] if only else list(bridge_messages)
+        current: set[str] = set()
+        if only is None:
+            health = self._health_interval > 0  # the sensors read it
+            bridge_messages = build_bridge_discovery(
+                self.topics,
+                self.origin,
+                self.topics.base,
+                buses=list(self.engine.schedulers) if health else [],
+                devices=list(self.engine.devices) if health else [],
+            )
+            await self._send(client, bridge_messages, current)
         for device_id, poller in self.engine.devices.items():
             if only is not None and device_id != only:
                 continue
             messages = self.discovery_for(poller)
-            if only is not None and messages == self._sent.get(device_id):
+            digest = hash(tuple(messages))
+            if only is not None and digest == self._sent.get(device_id):
                 return  # nothing changed
-            self._sent[device_id] = messages
-            wanted.extend(messages)
-        current = sorted({m.topic for m in wanted})
+            self._sent[device_id] = digest
+            await self._send(client, messages, current)
         if clear_stale:
-            await self._clear_stale(client, set(current))
-        for message in wanted:
-            await client.publish(message.topic, message.payload, retain=True)
-        if clear_stale:
-            record = json.dumps(current).encode()
+            await self._clear_stale(client, current)
+            record = json.dumps(sorted(current)).encode()
             await client.publish(self.topics.bridge_discovery, record, retain=True)
+
+    @staticmethod
+    async def _send(client: MqttClient, messages: list[Publish], sent: set[str]) -> None:
+        await client.publish_many((m.topic, m.payload, True) for m in messages)
+        sent.update(m.topic for m in messages)
 
     async def _clear_stale(self, client: MqttClient, current: set[str]) -> None:
         """Empty the retained configs this bridge published before but no longer produces."""
         prefix = self.topics.discovery_prefix
         found: dict[str, bytes] = {}
         for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
-            found |= await client.retained(pattern)
+            found |= await client.retained(pattern, keep=lambda topic: topic not in current)
         stale = {t for t, payload in found.items() if payload and self._ours(payload)}
         recorded = await client.retained(self.topics.bridge_discovery)
         stale |= self._recorded(recorded.get(self.topics.bridge_discovery, b""))

@@ -367,8 +367,15 @@ class MqttClient:
                 ) from exc
             yield _message(received)
 
-    async def retained(self, topic_filter: str, *, settle: float = 0.5) -> dict[str, bytes]:
-        """The retained messages under ``topic_filter`` now (topic -> payload).
+    async def retained(
+        self,
+        topic_filter: str,
+        *,
+        settle: float = 0.5,
+        keep: Callable[[str], bool] | None = None,
+    ) -> dict[str, bytes]:
+        """The retained messages under ``topic_filter`` now (topic -> payload), only those
+        whose topic ``keep`` accepts if given (the others are not held in memory).
 
         Subscribes, collects until no retained message came for ``settle`` seconds, then
         unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
@@ -387,14 +394,16 @@ class MqttClient:
                         received = await queue.get()
                 except TimeoutError:
                     break
-                found[received.topic.value] = received.payload
+                if keep is None or keep(received.topic.value):
+                    found[received.topic.value] = received.payload
             if not kept:
                 await self._unsubscribe(connection, topic_filter)
         finally:
             del connection.collectors[topic_filter]
         while not queue.empty():  # arrived between the last wait and the UNSUBACK
             received = queue.get_nowait()
-            found[received.topic.value] = received.payload
+            if keep is None or keep(received.topic.value):
+                found[received.topic.value] = received.payload
         return found
 
     async def _unsubscribe(self, connection: _Connection, topic_filter: str) -> None:
