@@ -70,6 +70,10 @@ class Guard:
         return cls(dangerous, frozenset(hidden), words)
 
     def __or__(self, other: Guard) -> Guard:
+        if not (other.dangerous or other.hidden or other.dangerous_words):
+            return self
+        if not (self.dangerous or self.hidden or self.dangerous_words):
+            return other
         dangerous = dict(self.dangerous)
         for cell, bits in other.dangerous.items():
             dangerous[cell] = dangerous.get(cell, 0) | bits

@@ -8,10 +8,12 @@ the codec and the planner work on.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -21,6 +23,8 @@ from bridge.core.entity import Entity, Table
 from bridge.core.protocol import OptionSpec, Protocol
 from bridge.core.yaml_source import parse_yaml
 from bridge.errors import MappingError
+
+T = TypeVar("T")
 
 
 class Source(BaseModel):
@@ -66,8 +70,33 @@ class Mapping(BaseModel):
             if checks.when_matches(entity.when, chosen)
         }
 
+    def memo(self, key: object, build: Callable[[], T]) -> T:
+        """What ``build`` returns, built once per mapping (many devices of one model share
+        their points, guard and read limits: they are immutable)."""
+        if key not in self.shared:
+            self.shared[key] = build()
+        found: T = self.shared[key]
+        return found
+
+    @cached_property
+    def shared(self) -> dict[object, Any]:
+        """``memo``'s store: not a field, so two equal mappings stay equal."""
+        return {}
+
+    def model_copy(self, *, update: AnyMapping[str, Any] | None = None, deep: bool = False) -> Self:
+        """A copy that builds its own shared facts (its protocol may differ)."""
+        copy = super().model_copy(update=update, deep=deep)
+        copy.__dict__.pop("shared", None)
+        return copy
+
     def points(self, options: dict[str, str] | None = None) -> dict[str, Point]:
-        """Resolve the active entities into points with wire addresses and linked sources."""
+        """Resolve the active entities into points with wire addresses and linked sources
+        (a dict of its own; the points in it are shared by every device of these options)."""
+        chosen = self.default_options() | (options or {})
+        key = ("points", tuple(sorted(chosen.items())))
+        return dict(self.memo(key, lambda: self._resolve(chosen)))
+
+    def _resolve(self, options: dict[str, str]) -> dict[str, Point]:
         active = self.active(options)
         rule = self.protocol.addressing
         plain = {key: _plain_point(key, entity, self.protocol) for key, entity in active.items()}

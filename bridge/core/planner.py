@@ -108,6 +108,24 @@ def limits_for(
     ``when`` of a valid mapping can be met, and variants do not move addresses).
     """
     protocol = mapping.protocol
+    reserved, defined, segments = mapping.memo("wire limits", lambda: _wire_limits(mapping))
+    return ReadLimits(
+        max_registers=_checked("max_registers", max_registers, protocol.max_read_registers),
+        max_bits=_checked("max_bits", max_bits, protocol.max_read_bits),
+        readable_gaps=protocol.readable_gaps,
+        unreadable=reserved | refused,
+        defined=defined,
+        segments=segments,
+        timing=timing,
+    )
+
+
+def _wire_limits(
+    mapping: Mapping,
+) -> tuple[frozenset[Address], frozenset[Address], tuple[WireSegment, ...]]:
+    """The reserved and the defined registers and the segments of a mapping, in wire
+    addresses (the same for every device of the model)."""
+    protocol = mapping.protocol
     rule = protocol.addressing
     reserved = frozenset(
         itertools.chain.from_iterable(
@@ -125,15 +143,7 @@ def limits_for(
         WireSegment(s.table, to_wire(s.start, rule), to_wire(s.end, rule), s.max_read_registers)
         for s in protocol.segments
     )
-    return ReadLimits(
-        max_registers=_checked("max_registers", max_registers, protocol.max_read_registers),
-        max_bits=_checked("max_bits", max_bits, protocol.max_read_bits),
-        readable_gaps=protocol.readable_gaps,
-        unreadable=reserved | refused,
-        defined=defined,
-        segments=tuple(sorted(segments, key=lambda s: (s.table, s.first))),
-        timing=timing,
-    )
+    return reserved, defined, tuple(sorted(segments, key=lambda s: (s.table, s.first)))
 
 
 def _end(reserved: Reserved, rule: Addressing) -> int:

@@ -75,7 +75,9 @@ class DevicePoller:
         self.mapping = _with_overrides(mapping, device)
         self.protocol: Protocol = self.mapping.protocol
         self.points: dict[str, Point] = self.mapping.points(device.options)
-        self.guard = guard | Guard.of(self.points.values())  # ``guard``: earlier mappings'
+        options = tuple(sorted((self.mapping.default_options() | device.options).items()))
+        own = self.mapping.memo(("guard", options), lambda: Guard.of(self.points.values()))
+        self.guard = guard | own  # ``guard``: what earlier mappings guarded
         self.scheduler = scheduler
         self.timing = timing
         self.timeout = device.protocol.response_timeout or timeout

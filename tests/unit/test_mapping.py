@@ -9,7 +9,13 @@ import pytest
 from pydantic import ValidationError
 
 from bridge.core.entity import Component, PollClass, Table
-from bridge.core.mapping import format_validation_errors, load_mapping, parse_mapping
+from bridge.core.mapping import (
+    builtin_mapping_path,
+    format_validation_errors,
+    load_mapping,
+    parse_mapping,
+)
+from bridge.core.planner import limits_for
 from bridge.errors import MappingError
 from tests.factory import make_mapping
 
@@ -544,3 +550,18 @@ def test_variant_presentation_is_checked_and_ha_merges() -> None:
     assert applied.ha.device_class is None
     assert applied.ha.entity_category == "config"
     assert applied.max == 300
+
+
+def test_devices_of_one_model_share_points_and_read_limits_without_changing_equality() -> None:
+
+    mapping = load_mapping(builtin_mapping_path("soft_starter"))
+    fresh = load_mapping(builtin_mapping_path("soft_starter"))
+    first, second = mapping.points(), mapping.points()
+    assert first is not second and first == second
+    assert all(first[k] is second[k] for k in first)  # the same (frozen) points
+    assert limits_for(mapping).defined is limits_for(mapping).defined
+    assert mapping == fresh  # what the memo holds is not part of the mapping
+    faster = mapping.protocol.model_copy(update={"max_read_registers": 2})
+    copy = mapping.model_copy(update={"protocol": faster})
+    assert copy.points()["motor_run"] is not first["motor_run"]  # built for the copy
+    assert limits_for(copy).max_registers == 2
