@@ -198,19 +198,31 @@ class _BusBase(_Strict):
         return _check_identifier(value)
 
 
-class SerialBus(_BusBase):
-    transport: Literal["rtu", "ascii"]
-    port: str = Field(description="serial device, e.g. /dev/ttyUSB0")
+class SerialLine(_Strict):
+    """A serial line's settings."""
+
     baudrate: int = Field(9600, ge=300, le=921600)
     parity: Literal["N", "E", "O"] = "N"
     stopbits: Literal[1, 2] = 1
     bytesize: Literal[7, 8] = 8
 
 
+class SerialBus(_BusBase, SerialLine):
+    transport: Literal["rtu", "ascii"]
+    port: str = Field(description="serial device, e.g. /dev/ttyUSB0")
+
+
 class TcpBus(_BusBase):
     transport: Literal["tcp", "rtu-over-tcp"]
     host: str
     tcp_port: int = Field(502, ge=1, le=65535)
+    serial_behind: SerialLine | None = Field(
+        None,
+        description=(
+            "the RS485 line behind a TCP gateway (its baudrate, parity, stopbits): reads are "
+            "planned for the least time on that line, not on the network"
+        ),
+    )
 
 
 Bus = Annotated[SerialBus | TcpBus, Field(discriminator="transport")]
@@ -368,9 +380,25 @@ class Config(_Strict):
             other = units.setdefault((device.bus, device.unit), device.id)
             if other != device.id:
                 errors.append(f"{where}.unit: unit {device.unit} is also {other!r} on {bus.id}")
+        errors += _shared_gateways(self.buses)
         if errors:
             raise ValueError("\n".join(errors))
         return self
+
+
+def _shared_gateways(buses: Iterable[SerialBus | TcpBus]) -> list[str]:
+    """A gateway's serial line carries one frame at a time: one bus per gateway port."""
+    seen: dict[tuple[str, int], str] = {}
+    errors = []
+    for bus in buses:
+        if isinstance(bus, TcpBus) and bus.serial_behind is not None:
+            other = seen.setdefault((bus.host, bus.tcp_port), bus.id)
+            if other != bus.id:
+                errors.append(
+                    f"buses.{bus.id}.host: {bus.host}:{bus.tcp_port} is bus {other!r} too; "
+                    "one serial line carries one frame at a time, so give its devices one bus"
+                )
+    return errors
 
 
 def _check_identifier(value: str) -> str:

@@ -69,6 +69,10 @@ NOTES: dict[str, str] = {
     "TcpBus.transport": "Modbus TCP, or RTU frames through a serial gateway (`rtu-over-tcp`)",
     "TcpBus.host": "address of the device or gateway",
     "TcpBus.tcp_port": "TCP port of the device or gateway",
+    "SerialLine.baudrate": "line speed in bit/s of the RS485 side, as set on the gateway",
+    "SerialLine.parity": "N (none), E (even), O (odd)",
+    "SerialLine.stopbits": "1 or 2",
+    "SerialLine.bytesize": "data bits",
     "DeviceConfig.id": "stable id: the MQTT topic `<base>/<id>` and Home Assistant ids",
     "DeviceConfig.name": "name shown in Home Assistant (default: from the id)",
     "DeviceConfig.bus": "id of the bus the device is on",
@@ -209,6 +213,13 @@ def _sections(schema: Schema) -> Iterator[Section]:
         transports = " or ".join(f"`{t}`" for t in defs[name]["properties"]["transport"]["enum"])
         lead = f"A bus whose `transport` is {transports}."
         yield Section(anchor, f"`buses[]`: {title}", name, defs[name], lead)
+    yield Section(
+        "buses-serial-behind",
+        "`buses[].serial_behind`",
+        "SerialLine",
+        defs["SerialLine"],
+        "The RS485 line behind a Modbus TCP gateway or serial server, for planning reads.",
+    )
     yield Section("devices", "`devices[]`", "DeviceConfig", defs["DeviceConfig"])
     yield Section("devices-poll", "`devices[].poll`", "PollConfig", defs["PollConfig"])
     yield Section(
@@ -295,6 +306,7 @@ _ANCHORS = {
     "ManagementConfig": ("bridge", "bridge"),
     "MetricsConfig": ("bridge.metrics", "bridge-metrics"),
     "WebConfig": ("bridge.web", "bridge-web"),
+    "SerialLine": ("buses[].serial_behind", "buses-serial-behind"),
     "DeviceConfig": ("devices[]", "devices"),
     "PollConfig": ("devices[].poll", "devices-poll"),
     "ProtocolOverride": ("devices[].protocol", "devices-protocol"),

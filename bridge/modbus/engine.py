@@ -20,7 +20,7 @@ from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.health import HealthPolicy
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, WriteSnapshot
 from bridge.core.mapping import Mapping
-from bridge.core.timing import LinkTiming
+from bridge.core.timing import LinkTiming, Mode
 from bridge.errors import ValueRejectedError
 from bridge.modbus.poller import DEFAULT_POLICY, DevicePoller, DeviceUpdate
 from bridge.modbus.scheduler import BusScheduler
@@ -28,23 +28,26 @@ from bridge.modbus.transport import Transport
 
 
 def link_timing(bus: SerialBus | TcpBus) -> LinkTiming:
-    """The wire-time model of a bus (serial framing, or TCP)."""
-    if isinstance(bus, SerialBus):
-        timing = LinkTiming.for_serial(bus.baudrate, bus.parity, bus.stopbits, bus.bytesize)
-        return (
-            timing
-            if bus.transport == "rtu"
-            else LinkTiming(
-                mode="ascii", baudrate=timing.baudrate, bits_per_char=timing.bits_per_char
-            )
-        )
-    return LinkTiming(mode="tcp")
+    """The wire-time model of a bus: serial framing, the RTU line behind a TCP gateway
+    (``serial_behind``), or TCP."""
+    line = bus if isinstance(bus, SerialBus) else bus.serial_behind
+    if line is None:
+        return LinkTiming(mode="tcp")
+    mode: Mode = "ascii" if bus.transport == "ascii" else "rtu"
+    return LinkTiming.for_serial(
+        line.baudrate, line.parity, line.stopbits, line.bytesize, mode=mode
+    )
 
 
 def bus_scheduler(bus: SerialBus | TcpBus, *, guard_late_replies: bool = True) -> BusScheduler:
-    """The scheduler of one bus: its transport, the serial inter-frame silence, and (unless
-    turned off) a silent timeout after a timeout where replies carry no transaction id."""
-    gap = link_timing(bus).silence if isinstance(bus, SerialBus) else 0.0
+    """The scheduler of one bus: its transport, the serial inter-frame silence (also behind a
+    transparent serial server, which forwards bytes as they come; a Modbus TCP gateway
+    keeps its own), and (unless turned off) a silent timeout after a timeout where replies
+    carry no transaction id."""
+    serial = isinstance(bus, SerialBus) or (
+        bus.transport == "rtu-over-tcp" and bus.serial_behind is not None
+    )
+    gap = link_timing(bus).silence if serial else 0.0
     late_replies = guard_late_replies and bus.transport != "tcp"  # only TCP names requests
     return BusScheduler(Transport(bus), gap, late_replies=late_replies)
 
