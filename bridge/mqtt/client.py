@@ -318,9 +318,16 @@ class MqttClient:
         """Publish (topic, payload, retain) messages all at once and wait for every
         acknowledgement together: a burst (the whole state after a reconnect) costs one
         round trip, not one per message."""
-        async with asyncio.TaskGroup() as group:
-            for topic, payload, retain in messages:
-                group.create_task(self.publish(topic, payload, retain=retain))
+        # gather, not a TaskGroup: on Python 3.11 a TaskGroup whose task fails while it
+        # waits leaves its parent task marked as cancelling for good (fixed in 3.12), and
+        # the reconnect loop must go on after a lost connection
+        results = await asyncio.gather(
+            *(self.publish(topic, payload, retain=retain) for topic, payload, retain in messages),
+            return_exceptions=True,
+        )
+        for result in results:
+            if isinstance(result, BaseException):
+                raise result
 
     async def subscribe(self, *filters: str, qos: int = 1, live_only: bool = False) -> None:
         """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused.

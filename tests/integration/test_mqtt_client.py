@@ -408,6 +408,23 @@ async def test_a_publish_waiting_for_its_ack_ends_when_the_broker_dies() -> None
 
 
 @pytest.mark.asyncio
+async def test_a_burst_cut_by_a_lost_connection_leaves_the_caller_free_to_reconnect() -> None:
+    """On Python 3.11 a TaskGroup whose task fails while it waits leaves the waiting task
+    marked as cancelling: the next await of the reconnect loop would end the MQTT side."""
+    burst = [("t/a", "1", True), ("t/lost", "2", True), ("t/b", "3", True)]
+    async with (
+        StubBroker(dies_on=b"t/lost") as url,
+        MqttClient(cfg(url, version="3.1.1"), will_topic=STATE) as client,
+    ):
+        async with asyncio.timeout(5):
+            with pytest.raises(MqttDisconnectedError):
+                await client.publish_many(burst)
+    task = asyncio.current_task()
+    assert task is not None and task.cancelling() == 0
+    await asyncio.sleep(0)  # would raise CancelledError if a cancel were left pending
+
+
+@pytest.mark.asyncio
 async def test_dup_flag_and_mid_of_a_redelivery() -> None:
     async with (
         StubBroker() as url,
