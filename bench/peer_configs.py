@@ -109,8 +109,11 @@ def trimmed_mapping() -> dict[str, Any]:
     return dict(document)
 
 
-def bridge_config(url: str, modbus_port: int, units: list[int], mapping: str) -> dict[str, Any]:
-    """This bridge: one TCP bus, one device per unit, the trimmed ``mapping`` (a path)."""
+def bridge_config(
+    url: str, modbus_port: int, units: list[int], mapping: str, **mqtt_settings: Any
+) -> dict[str, Any]:
+    """This bridge: one TCP bus, one device per unit, the trimmed ``mapping`` (a path);
+    ``mqtt_settings`` beside the defaults (``output: values`` for plain topics only)."""
     devices = [
         {
             "id": DEVICES[unit],
@@ -122,7 +125,7 @@ def bridge_config(url: str, modbus_port: int, units: list[int], mapping: str) ->
         for unit in units
     ]
     bus = {"id": "gateway", "transport": "tcp", "host": "127.0.0.1", "tcp_port": modbus_port}
-    mqtt = {"url": url, "client_id": "bench-bridge"}
+    mqtt = {"url": url, "client_id": "bench-bridge"} | mqtt_settings
     return {"mqtt": mqtt, "buses": [bus], "devices": devices}
 
 
@@ -207,6 +210,11 @@ def write_configs(folder: Path, url: str, modbus_port: int, units: list[int]) ->
     paths["mapping"].write_text(yaml.safe_dump(trimmed_mapping(), sort_keys=False))
     config = bridge_config(url, modbus_port, units, paths["mapping"].name)
     paths["bridge"].write_text(yaml.safe_dump(config, sort_keys=False))
+    plain = bridge_config(
+        url, modbus_port, units, paths["mapping"].name, output="values", discovery="off"
+    )
+    paths["bridge-values"] = folder / "bridge-values.yaml"
+    paths["bridge-values"].write_text(yaml.safe_dump(plain, sort_keys=False))
     for unit in units:
         path = folder / f"modbus4mqtt-{DEVICES[unit]}.yaml"
         path.write_text(yaml.safe_dump(modbus4mqtt_config(modbus_port, unit), sort_keys=False))

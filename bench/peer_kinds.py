@@ -104,10 +104,12 @@ class Kind:
 class ThisBridge(Kind):
     name = "bridge"
     title = "this bridge"
-    notes = ("defaults: MQTT 5, QoS 1, retained JSON state and per-key topics, discovery",)
+    notes = ("defaults: MQTT 5, QoS 1, retained compact JSON state, discovery",)
+    config = "bridge"
 
     def argv(self, run: Run) -> list[list[str]]:
-        return [[str(BRIDGE), "run", "-c", str(run.paths["bridge"]), "--log-level", "warning"]]
+        config = str(run.paths[self.config])
+        return [[str(BRIDGE), "run", "-c", config, "--log-level", "warning"]]
 
     def read(self, topic: str, payload: bytes) -> dict[str, object]:
         device = f"modbus/{DEVICES[UNIT]}"
@@ -122,6 +124,15 @@ class ThisBridge(Kind):
 
     def command(self, on: bool) -> tuple[str, str]:
         return f"modbus/{DEVICES[UNIT]}/{COMMAND_KEY}/set", "ON" if on else "OFF"
+
+
+class ThisBridgeValues(ThisBridge):
+    """The same, publishing what the peers publish: a plain topic per changed value."""
+
+    name = "bridge-values"
+    title = "this bridge, output: values"
+    notes = ("mqtt.output: values (plain per-key topics only), discovery: off",)
+    config = "bridge-values"
 
 
 class Modbus4mqtt(Kind):
@@ -188,4 +199,4 @@ class Modbus2mqtt(Kind):
         return f"{M2_PREFIX}/{DEVICES[UNIT]}/set/{COMMAND_KEY}", "1" if on else "0"
 
 
-KINDS: tuple[Kind, ...] = (Modbus4mqtt(), Modbus2mqtt(), ThisBridge())
+KINDS: tuple[Kind, ...] = (Modbus4mqtt(), Modbus2mqtt(), ThisBridge(), ThisBridgeValues())
