@@ -209,7 +209,8 @@ class Bridge:
             for key in sorted(keys & set(published(poller.points))):
                 payload = plain_payload(poller.values.get(key))
                 burst.append((topics.value(device_id, key), payload, True))
-        availability = "online" if poller.health.online else "offline"
+        # online once it answered and its values are out (not before: nothing to show yet)
+        availability = "online" if poller.health.online and poller.values else "offline"
         if self._availability.get(device_id) != availability:
             self._availability[device_id] = availability
             burst.append((topics.availability(device_id), availability, True))
