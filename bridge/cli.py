@@ -9,6 +9,7 @@ import argparse
 import asyncio
 import importlib
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -36,16 +37,27 @@ EXIT_FAILED = 1
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
     arguments = sys.argv[1:] if argv is None else list(argv)
-    parser = _parser(_command_of(arguments))
-    args = parser.parse_args(arguments)
     try:
-        return int(args.handler(args, sys.stdout))
+        args = _parser(_command_of(arguments)).parse_args(arguments)
+        code = int(args.handler(args, sys.stdout))
+        sys.stdout.flush()
+    except BrokenPipeError:  # `schema | head`: the reader has seen enough
+        return _reader_gone()
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except OSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    return code
+
+
+def _reader_gone() -> int:
+    """stdout's reader closed the pipe: say nothing (Python's own advice: point stdout at
+    devnull so the flush at exit cannot fail again) and exit 1."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    return EXIT_FAILED
 
 
 # Subcommands whose modules load what ``run`` never needs (rich, the simulator, the

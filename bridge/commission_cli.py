@@ -244,18 +244,27 @@ async def _scan_showing_progress(
     done: list[int],
 ) -> None:
     """Scan with a progress bar on stderr, once the bus is open; ``found`` and ``done``
-    fill as units answer, so an interrupted scan keeps what it learned."""
+    fill as units answer, so an interrupted scan keeps what it learned. On a terminal the
+    bar counts the units found and what they answered is printed once, in the table at the
+    end; when the results go elsewhere (a file, ``--json`` to a script), each unit found
+    is also a line on stderr as it answers."""
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
+    echo = not (sys.stdout.isatty() and sys.stderr.isatty())
     async with open_bus(bus) as submit:
         with Progress(*columns, TimeRemainingColumn(), console=Console(stderr=True)) as progress:
             task = progress.add_task(f"scanning {_where(bus)}", total=len(units))
 
             def heard(unit: int, result: Found | None) -> None:
                 done.append(unit)
-                progress.update(task, advance=1, description=f"scanning {_where(bus)}: unit {unit}")
                 if result is not None:
                     found.append(result)
-                    progress.console.print(f"unit {unit}: {result.describe()}", highlight=False)
+                    if echo:
+                        progress.console.print(f"unit {unit}: {result.describe()}", highlight=False)
+                progress.update(
+                    task,
+                    advance=1,
+                    description=f"scanning {_where(bus)}: unit {unit}, {len(found)} found",
+                )
 
             await scan(submit, units, timeout, heard)
 

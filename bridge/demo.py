@@ -29,6 +29,14 @@ from bridge.lifecycle import add_logging_arguments, configure_logging, until_sto
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.mqtt.broker import PROTOCOL, embedded_broker
 
+DESCRIPTION = """\
+The five seed devices, simulated, on MQTT in seconds (no hardware needed).
+
+It serves the five shipped mappings as simulated units 1..5 on a loopback Modbus TCP
+port, picks a broker (--mqtt-url, else 127.0.0.1:1883 if something answers there, else
+an embedded one), runs the real bridge against them with Home Assistant discovery, and
+shows a live table of the devices, their state and the topics to subscribe to.
+Ctrl-C (or SIGTERM) stops everything."""
 LOOPBACK = "127.0.0.1"
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_WEB_PORT = 8099
@@ -62,7 +70,7 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     demo = commands.add_parser(
         "demo",
         help="simulate the five seed devices and bridge them to MQTT (no hardware needed)",
-        description=__doc__,
+        description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     demo.add_argument("--mqtt-url", metavar="URL", help="broker to use (mqtt://host:port)")

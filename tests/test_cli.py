@@ -98,3 +98,28 @@ def test_version(capsys: pytest.CaptureFixture[str]) -> None:
         main(["--version"])
     assert caught.value.code == 0
     assert capsys.readouterr().out.startswith("modbus-mqtt-bridge ")
+
+
+def test_a_reader_that_stops_early_is_no_error() -> None:
+    """``schema | head``: the pipe closes before the schema is written; nothing on stderr."""
+    with subprocess.Popen(
+        [sys.executable, "-m", "bridge.cli", "schema"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=ROOT,
+    ) as schema:
+        assert schema.stdout is not None and schema.stderr is not None
+        first = schema.stdout.readline()
+        schema.stdout.close()  # what head does after its lines
+        err = schema.stderr.read().decode()
+        schema.wait(30)
+    assert first.strip() == b"{"
+    assert err == ""
+
+
+@pytest.mark.parametrize("command", ["demo", "simulate", "run", "check", "scan", "read"])
+def test_help_is_plain_text(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """--help shows what a terminal can show: no reST markup from docstrings."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert "``" not in capsys.readouterr().out

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
+import pty
 import signal
 import subprocess
 import sys
@@ -98,7 +100,7 @@ def test_scan_json_finds_exactly_the_units(
         2,
         "illegal data address",
     )
-    assert "unit 3: exception 2 (illegal data address)" in err
+    assert "unit 3: exception 2 (illegal data address)" in err  # live, the JSON comes last
 
 
 def test_scan_prints_a_table(served: Served, capsys: pytest.CaptureFixture[str]) -> None:
@@ -111,6 +113,41 @@ def test_scan_prints_a_table(served: Served, capsys: pytest.CaptureFixture[str])
     assert [row[0] for row in rows[2:]] == ["4", "3"]
     assert rows[2][1] == "values"  # the genset answers holding 0
     assert rows[3][1:5] == ["exception", "2", "(illegal", "data"]
+
+
+def test_scan_in_a_terminal_shows_each_unit_once(served: Served) -> None:
+    """stdout and stderr on one terminal: the bar counts, the table tells, once."""
+    main_fd, side = pty.openpty()
+    command = [sys.executable, "-m", "bridge.cli", "scan", "--bus", served.bus]
+    env = os.environ | {"COLUMNS": "100", "TERM": "xterm"}
+    with subprocess.Popen(
+        [*command, "--units", "1-4", "--timeout", "0.2"],
+        stdout=side,
+        stderr=side,
+        env=env,
+        cwd=ROOT,
+    ) as process:
+        os.close(side)
+        screen = b""
+        try:
+            while True:
+                try:
+                    chunk = os.read(main_fd, 65536)
+                except OSError:  # the process closed the terminal
+                    break
+                if not chunk:
+                    break
+                screen += chunk
+            assert process.wait(20) == 0
+        finally:
+            if process.poll() is None:
+                process.kill()
+            os.close(main_fd)
+    text = screen.decode(errors="replace")
+    assert "3 found" in text  # the bar's count
+    # units 1 and 3 answer holding 0 with exception 2: two rows of the table, nothing more
+    assert text.count("illegal data address") == 2
+    assert "unit 1:" not in text
 
 
 def test_scan_that_finds_nobody_exits_1(served: Served, capsys: pytest.CaptureFixture[str]) -> None:
