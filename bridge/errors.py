@@ -107,7 +107,7 @@ class DeviceExceptionError(ModbusError):
         self.code = code
         self.meaning = meaning
         self.action = action
-        super().__init__(f"exception {code:02X}h: {meaning}")
+        super().__init__(f"exception {code} ({meaning})")
 
 
 class FrameError(ModbusError):

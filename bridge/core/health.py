@@ -42,7 +42,7 @@ def exception_meaning(code: int, protocol: Protocol) -> ExceptionMeaning:
     """The device's own meaning of an exception code, else the standard one."""
     if code in protocol.exceptions:
         return protocol.exceptions[code]
-    return STANDARD_EXCEPTIONS.get(code, ExceptionMeaning(name=f"exception {code}"))
+    return STANDARD_EXCEPTIONS.get(code, ExceptionMeaning(name="not a standard code"))
 
 
 class Outcome(StrEnum):

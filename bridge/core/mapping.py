@@ -18,7 +18,7 @@ from typing import Any, Self, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from bridge.core import checks
-from bridge.core.address import to_wire
+from bridge.core.address import format_address, to_wire
 from bridge.core.entity import Entity, Table
 from bridge.core.protocol import OptionSpec, Protocol
 from bridge.core.yaml_source import parse_yaml
@@ -158,6 +158,20 @@ def _plain_point(key: str, entity: Entity, protocol: Protocol) -> Point:
         write_function=checks.write_function(entity, protocol) if entity.writable else None,
         coil_on_value=protocol.coil_on_value,
     )
+
+
+def printed_address(points: Iterable[Point], table: Table, wire: int, protocol: Protocol) -> str:
+    """A wire address as the manual prints it: the address of the point that holds it
+    (``F0.01``, ``0x00A0``; ``+n`` for the n-th register of a longer value), else the
+    addressing rule's offset undone."""
+    rule = protocol.addressing
+    for point in points:
+        if point.table is table and wire in point.span:
+            printed, step = point.entity.address, wire - point.address
+            if step and isinstance(printed, int):
+                return format_address(printed + step, rule)
+            return format_address(printed, rule) + (f"+{step}" if step else "")
+    return format_address(wire - rule.offset, rule)
 
 
 # --- loading ------------------------------------------------------------------------

@@ -205,7 +205,7 @@ def explain(unit: int, error: ModbusError) -> str:
     data address)``, ``unit 3 did not answer within 1 s``."""
     if isinstance(error, DeviceExceptionError):
         verb = {"refused": "refused", "busy": "is busy"}.get(error.action, "failed")
-        return f"unit {unit} {verb}: exception {error.code} ({error.meaning})"
+        return f"unit {unit} {verb}: {error}"
     return str(error)  # timeouts and frame errors name the unit; a bus error is the bus's
 
 

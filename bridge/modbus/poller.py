@@ -21,7 +21,7 @@ from bridge.core.codec import Value, decode
 from bridge.core.entity import PollClass, Table
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.health import DeviceHealth, HealthPolicy, Outcome, Transition
-from bridge.core.mapping import Mapping, Point
+from bridge.core.mapping import Mapping, Point, printed_address
 from bridge.core.planner import ReadLimits, addresses_of, limits_for, plan_reads
 from bridge.core.protocol import Protocol
 from bridge.core.refusal import Refusal, refusal_search
@@ -292,7 +292,7 @@ class DevicePoller:
             fresh.add((read.table, address))
         back = self.refusals.answer(addresses_of(read))
         if back:
-            log.info("%s answers %s again; read again", self.device.id, _shown(back))
+            log.info("%s answers %s again; read again", self.device.id, self._shown(back))
             self._forget_plans()
 
     def _remember(self, refusal: Refusal, exc: DeviceExceptionError) -> None:
@@ -302,28 +302,36 @@ class DevicePoller:
         first = self.refusals.learn(refusal.refused, time.monotonic())
         if first:
             log.warning(
-                "%s refused %s (%s); not read again for %.0f s",
+                "%s refused %s with %s; not read again for %.0f s",
                 self.device.id,
-                _shown(first),
-                exc.meaning,
+                self._shown(first),
+                exc,
                 self.refusals.recheck,
             )
         elif refusal.refused:
-            log.debug("%s refused %s again", self.device.id, _shown(refusal.refused))
+            log.debug("%s refused %s again", self.device.id, self._shown(refusal.refused))
         if refusal.refused - avoided:
             self._forget_plans()
-        if refusal.max_count is not None:
-            self.max_read = min(self.max_read or refusal.max_count, refusal.max_count)
+        if refusal.max_count is not None and refusal.max_count < (self.max_read or 0x10000):
+            self.max_read = refusal.max_count
             log.warning(
                 "%s: at most %d registers per read; plans adjusted", self.device.id, self.max_read
             )
             self._forget_plans()
 
+    def _shown(self, addresses: Iterable[Address]) -> str:
+        """``holding 0x00A0 (wire 159)``: the address as the manual prints it, and as sent."""
+        return ", ".join(
+            f"{table.value} {printed_address(self.points.values(), table, wire, self.protocol)}"
+            f" (wire {wire})"
+            for table, wire in sorted(addresses)
+        )
+
     def _recheck_refusals(self) -> None:
         """Forget the refusals learnt ``refusal_recheck`` ago: the next plan reads them."""
         due = self.refusals.expire(time.monotonic())
         if due:
-            log.debug("%s: reading %s again (refused before)", self.device.id, _shown(due))
+            log.debug("%s: reading %s again (refused before)", self.device.id, self._shown(due))
             self._forget_plans()
 
     def _refused_everything(self) -> None:
@@ -438,10 +446,6 @@ def _next_tick(due: float, interval: float | None, now: float) -> float:
         return float("inf")
     missed = max(0, int((now - due) // interval))
     return due + (missed + 1) * interval
-
-
-def _shown(addresses: Iterable[Address]) -> str:
-    return ", ".join(f"{t.value} {a}" for t, a in sorted(addresses))
 
 
 def _with_overrides(mapping: Mapping, device: DeviceConfig) -> Mapping:

@@ -499,8 +499,9 @@ async def run_with_reconnect(
     back within half a second of a restarted broker, then doubling up to 30 s).
     ``on_state`` hears ``"online"`` after each connect and ``"offline"`` when a session is
     lost. Returns when ``session`` returns; any error other than
-    MqttConnectError/MqttDisconnectedError propagates. The outage is logged once when it
-    starts and once when it ends.
+    MqttConnectError/MqttDisconnectedError propagates. Each connect is logged at INFO
+    (broker and protocol); an outage is logged once when it starts (WARNING) and once
+    when it ends.
     """
     backoff = backoff or ReconnectBackoff()
     outage: str | None = None
@@ -512,13 +513,14 @@ async def run_with_reconnect(
                 connected = True
                 version = client.protocol
                 backoff.connected(time.monotonic())
-                if outage is not None:
-                    _log.info(
-                        "MQTT broker %s reachable again",
-                        config.url,
-                        extra={"event": "mqtt_up", "broker": config.url},
-                    )
-                    outage = None
+                _log.info(
+                    "MQTT %s %s (MQTT %s)",
+                    "connected to" if outage is None else "reachable again:",
+                    config.url,
+                    client.protocol,
+                    extra={"event": "mqtt_up", "broker": config.url, "protocol": client.protocol},
+                )
+                outage = None
                 if on_state is not None:
                     on_state("online")
                 await session(client)

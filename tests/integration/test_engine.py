@@ -271,7 +271,7 @@ async def test_refused_addresses_are_learnt_and_avoided() -> None:
 
 
 @pytest.mark.asyncio
-async def test_a_smaller_read_limit_is_learnt() -> None:
+async def test_a_smaller_read_limit_is_learnt(caplog: pytest.LogCaptureFixture) -> None:
     sim = simulator((1, "soft_starter"), max_read_registers=2)
     async with serving_tcp(sim) as port:
         engine = Engine(config([tcp_bus(port)], [device("soft_starter")]))
@@ -280,6 +280,8 @@ async def test_a_smaller_read_limit_is_learnt() -> None:
             await starter.poll(ALL)
             assert starter.max_read is not None
             assert starter.max_read <= 2
+            learnt = [r for r in caplog.records if "registers per read" in r.getMessage()]
+            assert len(learnt) == 1  # said once, though several blocks showed it
             assert_same_values(engine, "soft_starter_1", 1, sim)
             refusals = sum(starter.health.exceptions.values())
             await starter.poll(ALL)

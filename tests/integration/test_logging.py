@@ -135,3 +135,6 @@ async def test_run_logs_json_lines_for_containers(mosquitto: Broker, tmp_path: P
     assert [line["device"] for line in offline] == ["gone"]
     assert offline[0]["level"] == "warning" and offline[0]["unit"] == 2
     assert {"time", "level", "logger", "message"} <= set(lines[0])
+    (connected,) = [line for line in lines if line.get("event") == "mqtt_up"]
+    assert connected["level"] == "info"
+    assert connected["message"] == f"MQTT connected to {mosquitto.url} (MQTT 5)"

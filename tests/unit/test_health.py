@@ -86,7 +86,7 @@ def test_counters_and_latency_percentiles() -> None:
         (2, {}, "illegal data address", "refused"),
         (6, {}, "server device busy", "busy"),
         (4, {}, "server device failure", "fail"),
-        (0x42, {}, "exception 66", "fail"),
+        (0x42, {}, "not a standard code", "fail"),  # shown as exception 66 (not a ...)
         (
             8,
             {8: ExceptionMeaning(name="busy (EEPROM write)", action="busy")},

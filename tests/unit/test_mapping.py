@@ -14,6 +14,7 @@ from bridge.core.mapping import (
     format_validation_errors,
     load_mapping,
     parse_mapping,
+    printed_address,
 )
 from bridge.core.planner import limits_for
 from bridge.errors import MappingError
@@ -35,6 +36,26 @@ def errors_of(entities: dict[str, dict[str, Any]], **top: Any) -> list[str]:
 
 
 # --- addresses ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("name", "table", "wire", "printed"),
+    [
+        ("nastec_vasco", Table.HOLDING, 0x9F, "0x00A0"),  # power factor: index 0xA0
+        ("nastec_vasco", Table.HOLDING, 0xAB, "0x00AC"),  # electric life, second word
+        ("nastec_vasco", Table.HOLDING, 0x6E, "0x006F"),  # a gap: the offset undone
+        ("p2_vfd", Table.HOLDING, 0xF008, "F0.08"),  # a parameter code
+        ("vacon_nx", Table.HOLDING, 2100, "2101"),  # decimal IDs
+        ("smartgen_hgm6100", Table.COIL, 7, "7"),  # generator on load, a coil
+    ],
+)
+def test_printed_address_of_a_wire_address(
+    name: str, table: Table, wire: int, printed: str
+) -> None:
+    """Log lines show the address as the manual prints it (bridge/modbus/poller.py)."""
+    mapping = load_mapping(builtin_mapping_path(name))
+    points = mapping.points().values()
+    assert printed_address(points, table, wire, mapping.protocol) == printed
 
 
 @pytest.mark.parametrize(
