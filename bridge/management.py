@@ -257,10 +257,13 @@ class Management:
         async with self._reloading:
             # all or nothing: errors change nothing; files are read off the event loop
             fresh = await asyncio.to_thread(self._load_mappings, settings)
+            # like with like: the file as loaded now against the file as loaded before (a
+            # poller's mapping carries the device's protocol overrides); an unchanged device
+            # keeps its poller, values, learnt refusals and health counters
             changed = [
                 d
                 for d in wanted
-                if fresh[d] != devices[d].mapping or settings[d] != devices[d].device
+                if fresh[d] != self.loaded.mappings.get(d) or settings[d] != devices[d].device
             ]
             for device_id in changed:
                 await self.engine.replace_mapping(device_id, fresh[device_id], settings[device_id])

@@ -234,3 +234,29 @@ async def test_serial_units_above_247_are_refused_before_the_bus(tmp_path: Path)
     )
     assert answer["error"] == "unit: serial lines address units 1..247"
     assert engine.schedulers["rs485"].counters.transactions == 0
+
+
+@pytest.mark.asyncio
+async def test_reloading_unchanged_files_restarts_no_device(tmp_path: Path) -> None:
+    """A device with protocol overrides in the config keeps its poller (values, learnt
+    refusals, health counters) when ``mapping/reload {}`` finds its file unchanged."""
+    data = {
+        "buses": [{"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": 1}],
+        "devices": [
+            {"id": "genset", "bus": "tcp", "unit": 5, "mapping": "smartgen_hgm6100"}
+            | {"protocol": {"min_request_interval": 0.2, "max_read_registers": 8}},
+            {"id": "pump", "bus": "tcp", "unit": 1, "mapping": "nastec_vasco"},
+        ],
+    }
+    loaded = load_config_data(data, tmp_path / "config.yaml")
+    engine = Engine(loaded)
+    before = dict(engine.devices)
+
+    async def reloaded(changed: list[str]) -> None:
+        raise AssertionError(f"nothing changed, yet {changed} were restarted")
+
+    management = Management(loaded, engine, on_reload=reloaded, mqtt_state=lambda: "online")
+    answer = json.loads(await management.handle("mapping/reload", b"{}"))
+    assert answer["data"] == {"reloaded": ["genset", "pump"], "changed": []}
+    assert engine.devices == before  # the same pollers
+    assert engine.devices["genset"].protocol.max_read_registers == 8  # overrides still on
