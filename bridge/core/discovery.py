@@ -3,8 +3,10 @@
 Device-based discovery (the default): one retained JSON document per device on
 ``<prefix>/device/<device>/config`` holding ``device``, ``origin``, the shared
 availability (the bridge's and the device's, both required: ``availability_mode: all``)
-and one ``cmps`` entry per published entity, plus ``status`` (when the status entity
-has another key) and ``alarms`` (when the mapping has alarm entities). Entity
+and one ``cmps`` entry per published entity, plus ``alarms`` (when the mapping has alarm
+entities). The mapping's status entity is published once, as itself (the Smartgen's
+"Genset status", the Vacon's "Running"): the state document's ``status`` copies its value
+for MQTT clients, never as a second, identical component. Entity
 mode (for Home Assistant versions without device-based discovery) publishes the same
 components one by one on ``<prefix>/<component>/<device>/<key>/config`` with the shared
 options inlined.
@@ -43,14 +45,11 @@ from bridge.core.discovery_entity import (
     alarms_config,
     component_config,
     slug,
-    status_config,
 )
-from bridge.core.entity import Entity
 from bridge.core.mapping import Mapping
 from bridge.core.topics import Topics
 
 SUPPORT_URL = "https://github.com/modbus-mqtt-bridge/modbus-mqtt-bridge"
-STATUS_KEY = "status"
 ALARMS_KEY = "alarms"
 BRIDGE_NAME = "Modbus MQTT bridge"
 _NO_UNITS: AnyMapping[str, str | None] = MappingProxyType({})
@@ -142,29 +141,17 @@ def build_device_discovery(
 def device_components(
     mapping: Mapping, options: AnyMapping[str, str], context: ComponentContext
 ) -> dict[str, Config]:
-    """Every component of one device, by key: entities, then ``status`` and ``alarms``."""
+    """Every component of one device, by key: entities (the status entity among them),
+    then ``alarms``."""
     active = mapping.active(dict(options))
     components: dict[str, Config] = {}
     for key, entity in active.items():
         config = component_config(key, entity, context)
         if config is not None:
             components[key] = config
-    status = _status_entity(mapping, active)
-    if status is not None:
-        components[STATUS_KEY] = status_config(status, context)
     if any(entity.alarm for entity in active.values()):
         components[ALARMS_KEY] = alarms_config(context)
     return components
-
-
-def _status_entity(mapping: Mapping, active: AnyMapping[str, Entity]) -> Entity | None:
-    """The entity behind the state document's ``status``, when it needs a component of
-    its own (an entity keyed ``status`` is that component already)."""
-    key = mapping.status
-    if key is None or key == STATUS_KEY or key not in active:
-        return None
-    entity = active[key]
-    return None if entity.secret or not entity.readable else entity
 
 
 def build_discovery(

@@ -125,18 +125,6 @@ def component_config(key: str, entity: Entity, context: ComponentContext) -> Con
     return config
 
 
-def status_config(entity: Entity, context: ComponentContext) -> Config:
-    """The ``status`` component: the value of the mapping's status entity, read-only."""
-    platform = read_only_platform(entity)
-    config = base_config("status", "Status", platform, context)
-    config["enabled_by_default"] = True
-    if entity.ha.icon is not None:
-        config["icon"] = entity.ha.icon
-    config |= _BUILDERS[platform]("status", entity, context)
-    config["expire_after"] = context.expire_after(entity.poll_class)
-    return config
-
-
 def alarms_config(context: ComponentContext) -> Config:
     """The ``alarms`` component: active alarm names joined, or ``none``."""
     config = base_config("alarms", "Active alarms", Component.SENSOR, context)

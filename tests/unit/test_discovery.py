@@ -479,17 +479,19 @@ def test_entities_follow_the_device_options() -> None:
 # --- status and alarms ------------------------------------------------------------------
 
 
-def test_status_component_mirrors_an_enum_status_entity() -> None:
+def test_the_status_entity_is_published_once_as_itself() -> None:
+    """A status keyed otherwise (the Smartgen's genset_status) is its own component, not
+    also a second, identical "Status" sensor; the alarms component joins the alarms."""
     entities = {
         "state": {"name": "State", "address": 0, "enum": {0: "stop", 1: "run"}},
         "trip": {"name": "Trip", "address": 1, "bit": 0, "alarm": True},
     }
     cmps = _cmps(entities, mapping_status="state")
-    assert list(cmps) == ["state", "trip", "status", "alarms"]
-    assert cmps["status"] == _ids("sensor", "status") | {
-        "name": "Status",
+    assert list(cmps) == ["state", "trip", "alarms"]
+    assert cmps["state"] == _ids("sensor", "state") | {
+        "name": "State",
         "enabled_by_default": True,
-    } | _state("status") | {
+    } | _state("state") | {
         "device_class": "enum",
         "options": ["stop", "run"],
         "expire_after": 602,
@@ -504,13 +506,21 @@ def test_status_component_mirrors_an_enum_status_entity() -> None:
     }
 
 
-def test_status_component_of_a_boolean_status_is_a_binary_sensor() -> None:
+def test_a_boolean_status_is_its_own_binary_sensor_only() -> None:
     entities = {"running": {"name": "Running", "address": 0, "bit": 1, "poll": "slow"}}
-    status = _cmps(entities, mapping_status="running")["status"]
-    assert status == _ids("binary_sensor", "status") | {
-        "name": "Status",
-        "enabled_by_default": True,
-    } | _state("status") | {"payload_on": "True", "payload_off": "False", "expire_after": 660}
+    cmps = _cmps(entities, mapping_status="running")
+    assert list(cmps) == ["running"]
+    assert cmps["running"]["platform"] == "binary_sensor"
+
+
+@pytest.mark.parametrize("name", builtin_mapping_names())
+def test_no_shipped_device_shows_its_status_twice(name: str) -> None:
+    """The status entity has one component: its own (named by the mapping)."""
+    mapping = load_mapping(builtin_mapping_path(name))
+    cmps = build_device_discovery(_device(mapping), TOPICS, ORIGIN)["cmps"]
+    assert mapping.status in cmps
+    readers = [k for k, c in cmps.items() if c.get("value_template", "").endswith(".status }}")]
+    assert readers == (["status"] if mapping.status == "status" else [])
 
 
 def test_an_entity_keyed_status_is_the_status_component() -> None:
