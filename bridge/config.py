@@ -429,7 +429,7 @@ def load_config(path: Path) -> LoadedConfig:
         text = path.read_text(encoding="utf-8")
         data = parse_yaml(text, str(path))
     except OSError as exc:
-        raise ConfigError(str(path), [f"cannot read: {exc.strerror}"]) from None
+        raise ConfigError(str(path), [f"cannot read {path.absolute()}: {exc.strerror}"]) from None
     except ValueError as exc:
         raise ConfigError(str(path), [str(exc)]) from None
     return load_config_data(data, path)

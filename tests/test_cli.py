@@ -123,3 +123,22 @@ def test_help_is_plain_text(command: str, capsys: pytest.CaptureFixture[str]) ->
     with pytest.raises(SystemExit):
         main([command, "--help"])
     assert "``" not in capsys.readouterr().out
+
+
+def test_a_missing_mapping_file_is_named_where_it_was_looked_for(tmp_path: Path) -> None:
+    """A config's mapping paths start at the config file's folder, whatever the current
+    directory; the error names the file it tried."""
+    site = tmp_path / "site"
+    site.mkdir()
+    config = site / "config.yaml"
+    config.write_text(
+        "buses: [{id: sim, transport: tcp, host: 127.0.0.1}]\n"
+        "devices: [{id: oven, bus: sim, unit: 1, mapping: my_device.yaml}]\n"
+    )
+    result = run("check", "-c", str(config))  # run from the repository's folder
+    assert result.returncode == 2
+    assert f"and no file {site / 'my_device.yaml'}" in result.stderr
+    (site / "my_device.yaml").write_text(
+        (ROOT / "examples" / "mappings" / "temperature_controller.yaml").read_text()
+    )
+    assert run("check", "-c", str(config)).returncode == 0

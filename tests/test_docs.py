@@ -8,7 +8,8 @@ Conventions of the ```yaml blocks in docs/mappings.md (its introduction says the
   wrapped into a minimal mapping by ``wrap_fragment`` and validated;
 - first line ``# fragment (invalid)``: a mistake shown on purpose: it must be refused, with
   every message quoted in its comments (``"a second whole value ..."``);
-- first line ``# config``: a config file, validated with the mappings it names;
+- first line ``# config [PATH]``: a config file (saved at PATH, relative to the repository),
+  validated with the mappings it names, relative to its folder;
 - anything else: a whole mapping, validated as it stands.
 
 Every file in examples/mappings/ loads for every option combination, plans within its
@@ -145,7 +146,12 @@ def test_mistakes_shown_are_refused_with_the_quoted_message(block: str) -> None:
 
 @pytest.mark.parametrize("block", blocks_of("config"), ids=block_id)
 def test_config_blocks_are_valid_with_their_mappings(block: str) -> None:
-    loaded = load_config_data(parse_yaml(block, "docs/mappings.md"), ROOT / "config.yaml")
+    """``# config PATH ...``: the file as saved at PATH, whose folder its mapping paths
+    are relative to (else the repository root)."""
+    first = block.split("\n", 1)[0].removeprefix("# config").split()
+    path = ROOT / (first[0] if first else "config.yaml")
+    assert path.parent.is_dir(), f"{path.parent} does not exist"
+    loaded = load_config_data(parse_yaml(block, "docs/mappings.md"), path)
     assert loaded.config.devices
 
 

@@ -196,7 +196,7 @@ def load_mapping(path: Path) -> Mapping:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise MappingError(str(path), [f"cannot read: {exc.strerror}"]) from None
+        raise MappingError(str(path), [f"cannot read {path.absolute()}: {exc.strerror}"]) from None
     return parse_mapping(text, str(path))
 
 
@@ -217,16 +217,22 @@ def builtin_mapping_path(name: str) -> Path:
 
 
 def resolve_mapping_path(ref: str, base: Path | None = None) -> Path:
-    """A mapping reference is a shipped name (``nastec_vasco``) or a path to a YAML file."""
+    """A mapping reference is a shipped name (``nastec_vasco``) or a path to a YAML file,
+    relative to ``base`` (a config file's folder), else to the current directory. An error
+    names the path it tried."""
     if ref in builtin_mapping_names():
         return builtin_mapping_path(ref)
     path = Path(ref)
-    if not path.is_absolute() and base is not None:
-        path = base / path
-    if path.suffix in (".yaml", ".yml") and path.is_file():
-        return path
+    if not path.is_absolute():
+        path = (base if base is not None else Path.cwd()) / path
+    if path.is_file():
+        if path.suffix in (".yaml", ".yml"):
+            return path
+        raise MappingError(ref, [f"{path.absolute()} is not a .yaml file"])
     known = ", ".join(builtin_mapping_names())
-    raise MappingError(ref, [f"no shipped mapping of that name ({known}) and no such file"])
+    raise MappingError(
+        ref, [f"no shipped mapping of that name ({known}) and no file {path.absolute()}"]
+    )
 
 
 def format_validation_errors(exc: ValidationError) -> Iterable[str]:

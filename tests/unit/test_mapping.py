@@ -15,6 +15,7 @@ from bridge.core.mapping import (
     load_mapping,
     parse_mapping,
     printed_address,
+    resolve_mapping_path,
 )
 from bridge.core.planner import limits_for
 from bridge.errors import MappingError
@@ -466,8 +467,29 @@ def test_not_a_mapping(text: str, message: str) -> None:
 
 
 def test_missing_file() -> None:
-    with pytest.raises(MappingError, match="cannot read"):
+    with pytest.raises(MappingError, match="cannot read /nonexistent/pump.yaml: No such file"):
         load_mapping(Path("/nonexistent/pump.yaml"))
+
+
+def test_a_mapping_path_is_relative_to_its_base_and_errors_name_the_path_tried(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Config files give ``base`` (their folder); command-line paths use the current
+    directory. A path that is not there is named in full."""
+    site, elsewhere = tmp_path / "site", tmp_path / "elsewhere"
+    site.mkdir()
+    elsewhere.mkdir()
+    (site / "pump.yaml").write_text("x: 1\n")
+    (site / "pump.txt").write_text("x: 1\n")
+    monkeypatch.chdir(elsewhere)
+    assert resolve_mapping_path("pump.yaml", site) == site / "pump.yaml"
+    assert resolve_mapping_path("nastec_vasco", site) == builtin_mapping_path("nastec_vasco")
+    with pytest.raises(MappingError) as missing:
+        resolve_mapping_path("pump.yaml")  # from the current directory
+    assert missing.value.issues[0].endswith(f"and no file {elsewhere / 'pump.yaml'}")
+    with pytest.raises(MappingError) as wrong:
+        resolve_mapping_path("pump.txt", site)
+    assert wrong.value.issues == (f"{site / 'pump.txt'} is not a .yaml file",)
 
 
 def test_points_link_their_sources() -> None:
