@@ -467,7 +467,7 @@ def test_not_a_mapping(text: str, message: str) -> None:
 
 
 def test_missing_file() -> None:
-    with pytest.raises(MappingError, match="cannot read /nonexistent/pump.yaml: No such file"):
+    with pytest.raises(MappingError, match=r"cannot read /nonexistent/pump\.yaml: No such file"):
         load_mapping(Path("/nonexistent/pump.yaml"))
 
 
