@@ -26,7 +26,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table as RichTable
 
 from bridge.bus_spec import FORMS, select_bus
-from bridge.config import SerialBus, TcpBus
+from bridge.config import SerialBus, TcpBus, load_config
 from bridge.core.entity import Table
 from bridge.core.interpret import ORDERS
 from bridge.errors import ModbusError, ValueRejectedError
@@ -273,11 +273,14 @@ def _read(args: argparse.Namespace, out: TextIO) -> int:
     request = raw_read(args.table, args.address, args.count)  # checked before the bus opens
     bus = select_bus(args.bus, args.config)
     timeout = args.timeout or bus.timeout
+    limit = _configured_limit(args.config, bus.id, args.unit, request.table)
 
     async def work(submit: Submit) -> dict[str, Any]:
-        return await read_interpreted(submit, args.unit, request, timeout)
+        return await read_interpreted(submit, args.unit, request, timeout, limit=limit)
 
     reading = _run(bus, work)
+    if reading["note"] and not args.json:
+        print(f"unit {args.unit}: {reading['note']}", file=sys.stderr)
     if args.json:
         _print_json(reading, out)
     elif request.table.is_bits:
@@ -285,6 +288,21 @@ def _read(args: argparse.Namespace, out: TextIO) -> int:
     else:
         _print_registers(reading, out)
     return EXIT_OK
+
+
+def _configured_limit(config: Path | None, bus_id: str, unit: int, table: Table) -> int | None:
+    """The read limit of the device the config puts at ``unit`` on that bus (its mapping,
+    with the device's protocol overrides), or None when there is none."""
+    if config is None:
+        return None
+    loaded = load_config(config)
+    for device in loaded.config.devices:
+        if device.bus == bus_id and device.unit == unit and device.id in loaded.mappings:
+            protocol = loaded.mappings[device.id].protocol
+            if table.is_bits:
+                return device.protocol.max_read_bits or protocol.max_read_bits
+            return device.protocol.max_read_registers or protocol.max_read_registers
+    return None
 
 
 def _write(args: argparse.Namespace, out: TextIO) -> int:

@@ -178,8 +178,11 @@ class Management:
                 "secret or write-only values; raw reads of them need "
                 "bridge.allow_raw_writes: true"
             )
+        limit = device.limits().max_count(read.table) if device is not None else None
         async with self._raw_slot(scheduler):
-            reading = await read_interpreted(scheduler_submit(scheduler), unit, read, timeout)
+            reading = await read_interpreted(
+                scheduler_submit(scheduler), unit, read, timeout, limit=limit
+            )
         return {"bus": scheduler.bus_id, **reading}
 
     async def _write(self, request: DeviceWrite) -> dict[str, Any]:

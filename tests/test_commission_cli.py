@@ -193,7 +193,55 @@ def test_read_json_is_the_interpretation_of_what_the_unit_holds(
     )
     assert code == 0, err
     held = served.held(3, Table.HOLDING, 0x1000, 4)
-    assert json.loads(out) == {"unit": 3, "table": "holding", **interpret(0x1000, held)}
+    assert json.loads(out) == {
+        "unit": 3,
+        "table": "holding",
+        **interpret(0x1000, held),
+        "requests": 1,
+        "note": None,
+    }
+
+
+def test_a_pair_on_a_one_register_device_is_read_one_at_a_time(
+    served: Served, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The troubleshooting recipe ``read ... ADDRESS 2`` on the Nastec, which reads one
+    register per request: refused whole, then read register by register, and said so."""
+    code, out, err = run(capsys, "read", "--bus", served.bus, "--unit", "1", "151", "2")
+    assert code == 0, err
+    assert err == "unit 1: read one at a time: the unit refused 2 registers at once\n"
+    first, second = served.held(1, Table.HOLDING, 151, 2)
+    assert f"151 (0x0097)   0x{first:04X}" in out
+    assert f"152 (0x0098)   0x{second:04X}" in out
+    assert "ABCD" in out  # the pair, every order
+
+
+def test_a_register_refused_alone_is_named(
+    served: Served, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Wire 0x6C is the Nastec's last setting, 0x6D an undocumented index it refuses."""
+    code, out, err = run(capsys, "read", "--bus", served.bus, "--unit", "1", "0x6C", "2")
+    assert (code, out) == (1, "")
+    assert err == ("error: unit 1 refused: exception 2 (illegal data address, at holding 109)\n")
+
+
+def test_a_configured_device_is_read_within_its_limit(
+    served: Served, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """With -c, the device at that unit gives its read limit: split up front."""
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        f"buses: [{{id: line, transport: tcp, host: 127.0.0.1, tcp_port: {served.port}}}]\n"
+        "devices: [{id: pump, bus: line, unit: 1, mapping: nastec_vasco}]\n"
+    )
+    code, out, err = run(
+        capsys, "read", "-c", str(config), "--bus", "line", "--unit", "1", "151", "3", "--json"
+    )
+    assert code == 0, err
+    document = json.loads(out)
+    assert document["registers"] == served.held(1, Table.HOLDING, 151, 3)
+    assert document["requests"] == 3
+    assert document["note"] == "3 requests: the device reads at most 1 register at once"
 
 
 def test_read_shows_every_reading(served: Served, capsys: pytest.CaptureFixture[str]) -> None:

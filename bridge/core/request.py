@@ -24,6 +24,16 @@ class Read:
         return range(self.address, self.address + self.count)
 
 
+def split_read(read: Read, limit: int) -> tuple[Read, ...]:
+    """``read`` as consecutive reads of at most ``limit`` registers (or bits) each."""
+    if limit < 1:
+        raise ValueError(f"a read limit is at least 1, not {limit}")
+    return tuple(
+        Read(read.table, first, min(limit, read.address + read.count - first))
+        for first in range(read.address, read.address + read.count, limit)
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class Write:
     """One write transaction: function code, table, first wire address and the raw values.

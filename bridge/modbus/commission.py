@@ -31,7 +31,7 @@ from typing import Any
 from bridge.config import SerialBus, TcpBus
 from bridge.core.entity import Table
 from bridge.core.interpret import interpret, interpret_bits
-from bridge.core.request import Read, Write
+from bridge.core.request import Read, Write, split_read
 from bridge.errors import (
     DeviceExceptionError,
     DeviceTimeoutError,
@@ -191,13 +191,59 @@ def parse_table(table: Table | str) -> Table:
 
 
 async def read_interpreted(
-    submit: Submit, unit: int, request: Read, timeout: float
+    submit: Submit, unit: int, request: Read, timeout: float, *, limit: int | None = None
 ) -> dict[str, Any]:
     """Read and interpret: ``interpret()``'s dict (``interpret_bits()``'s for bit tables)
-    with the unit and table added."""
-    values = await submit(unit, request, timeout)
+    with the unit, the table, the number of ``requests`` sent and a ``note`` saying why
+    there were several (else None). See ``read_in_parts`` for ``limit``."""
+    values, requests, note = await read_in_parts(submit, unit, request, timeout, limit)
     reading = (interpret_bits if request.table.is_bits else interpret)(request.address, values)
-    return {"unit": unit, "table": request.table.value, **reading}
+    return {"unit": unit, "table": request.table.value, **reading} | {
+        "requests": requests,
+        "note": note,
+    }
+
+
+async def read_in_parts(
+    submit: Submit, unit: int, request: Read, timeout: float, limit: int | None
+) -> tuple[tuple[int, ...], int, str | None]:
+    """The values of ``request``, the requests it took and why there were several.
+
+    ``limit`` (the device's known read limit, from its mapping and what the bridge
+    learnt) splits the read up front. Without one, a read the unit refuses whole
+    (exception 2 or 3 on a device that reads one register per request, like the Nastec)
+    is read again one register (or bit) at a time: every part answered means the read
+    was only too long; a part refused alone is the error, naming its address.
+    """
+    kind = _kind(request.table)
+    if limit is not None and request.count > limit:
+        parts = split_read(request, limit)
+        each = kind if limit > 1 else kind.removesuffix("s")
+        note = f"{len(parts)} requests: the device reads at most {limit} {each} at once"
+        return await _read_parts(submit, unit, parts, timeout), len(parts), note
+    try:
+        return await submit(unit, request, timeout), 1, None
+    except DeviceExceptionError as exc:
+        if exc.action != "refused" or request.count == 1 or limit is not None:
+            raise
+    parts = split_read(request, 1)
+    note = f"read one at a time: the unit refused {request.count} {kind} at once"
+    return await _read_parts(submit, unit, parts, timeout), len(parts), note
+
+
+async def _read_parts(
+    submit: Submit, unit: int, parts: Sequence[Read], timeout: float
+) -> tuple[int, ...]:
+    values: list[int] = []
+    for part in parts:
+        try:
+            values += await submit(unit, part, timeout)
+        except DeviceExceptionError as exc:
+            where = f"{part.table.value} {part.address}"
+            if part.count > 1:
+                where += f"-{part.address + part.count - 1}"
+            raise DeviceExceptionError(exc.code, f"{exc.meaning}, at {where}", exc.action) from exc
+    return tuple(values)
 
 
 def explain(unit: int, error: ModbusError) -> str:

@@ -142,6 +142,13 @@ async def test_raw_read_returns_the_device_registers_and_every_interpretation(
         image = sim.image(1)
         assert by_device["data"]["registers"] == [image[(Table.HOLDING, 0x33)]]
 
+        # the README's first example: two registers of the Nastec, which reads one at a time
+        pair = await request(tester, "device/read", {"device": "pump", "address": 151, "count": 2})
+        assert pair["status"] == "ok", pair
+        assert pair["data"]["registers"] == [image[(Table.HOLDING, a)] for a in (151, 152)]
+        assert pair["data"]["requests"] == 2
+        assert pair["data"]["note"] == "2 requests: the device reads at most 1 register at once"
+
         answer = await request(
             tester, "device/read", {"bus": "tcp", "unit": 3, "address": 0x1001, "count": 4}
         )
