@@ -11,7 +11,6 @@ from __future__ import annotations
 import ipaddress
 import os
 import re
-from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,11 +23,20 @@ from pydantic import (
     Field,
     IPvAnyAddress,
     SecretStr,
+    TypeAdapter,
     ValidationError,
     field_validator,
     model_validator,
 )
 
+from bridge.config_checks import (
+    folder_errors,
+    reference_errors,
+    secret_errors,
+    topic_errors,
+    unique,
+    with_ids,
+)
 from bridge.core.duration import Duration
 from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
 from bridge.core.mapping import resolve_mapping_path as _resolve
@@ -37,9 +45,7 @@ from bridge.errors import ConfigError, MappingError
 
 _ID = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _TOPIC_FORBIDDEN = re.compile(r"[#+\x00]")
-MAX_TOPIC_BYTES = 65535  # MQTT's limit on a topic name
 MAX_PREFIX_BYTES = 1024  # base_topic, discovery_prefix: room left for device, entity, suffix
-_LONGEST_COMPONENT = "binary_sensor"
 
 
 class _Strict(BaseModel):
@@ -362,43 +368,10 @@ class Config(_Strict):
 
     @model_validator(mode="after")
     def _check_references(self) -> Self:
-        errors: list[str] = []
-        errors += _duplicates("buses", [bus.id for bus in self.buses])
-        errors += _duplicates("devices", [device.id for device in self.devices])
-        buses = {bus.id: bus for bus in self.buses}
-        units: dict[tuple[str, int], str] = {}
-        for device in self.devices:
-            where = f"devices.{device.id}"
-            bus = buses.get(device.bus)
-            if bus is None:
-                errors.append(f"{where}.bus: no bus {device.bus!r} (have {sorted(buses)})")
-                continue
-            if isinstance(bus, SerialBus) and device.unit > 247:
-                errors.append(f"{where}.unit: serial lines address units 1..247")
-            if not device.enabled:
-                continue
-            other = units.setdefault((device.bus, device.unit), device.id)
-            if other != device.id:
-                errors.append(f"{where}.unit: unit {device.unit} is also {other!r} on {bus.id}")
-        errors += _shared_gateways(self.buses)
+        errors = reference_errors(self.buses, self.devices)
         if errors:
             raise ValueError("\n".join(errors))
         return self
-
-
-def _shared_gateways(buses: Iterable[SerialBus | TcpBus]) -> list[str]:
-    """A gateway's serial line carries one frame at a time: one bus per gateway port."""
-    seen: dict[tuple[str, int], str] = {}
-    errors = []
-    for bus in buses:
-        if isinstance(bus, TcpBus) and bus.serial_behind is not None:
-            other = seen.setdefault((bus.host, bus.tcp_port), bus.id)
-            if other != bus.id:
-                errors.append(
-                    f"buses.{bus.id}.host: {bus.host}:{bus.tcp_port} is bus {other!r} too; "
-                    "one serial line carries one frame at a time, so give its devices one bus"
-                )
-    return errors
 
 
 def _check_identifier(value: str) -> str:
@@ -407,11 +380,6 @@ def _check_identifier(value: str) -> str:
     if value == "bridge":
         raise ValueError("'bridge' is reserved for <base>/bridge/... topics")
     return value
-
-
-def _duplicates(section: str, ids: list[str]) -> list[str]:
-    counts = Counter(ids)
-    return [f"{section}.{i}: id used {n} times" for i, n in counts.items() if n > 1]
 
 
 @dataclass(frozen=True, slots=True)
@@ -436,30 +404,76 @@ def load_config(path: Path) -> LoadedConfig:
 
 
 def load_config_data(data: object, path: Path) -> LoadedConfig:
-    """Validate parsed config data; mapping paths are relative to ``path``'s folder."""
+    """Validate parsed config data; mapping paths are relative to ``path``'s folder.
+
+    Every problem of the file is reported at once: when some fields are invalid, the parts
+    that validate on their own (sections, buses, devices) are still checked against each
+    other and their mappings, so nothing waits for a second run."""
     if not isinstance(data, dict):
         raise ConfigError(str(path), ["the file must hold a mapping with mqtt, buses, devices"])
     try:
         config = Config.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(str(path), _with_ids(format_validation_errors(exc), data)) from None
-    mappings, errors = _load_mappings(config, path.parent)
-    errors += _secret_errors(config.mqtt)
+        rows = with_ids(format_validation_errors(exc), data)
+        raise ConfigError(str(path), unique(rows + _errors_of_valid_parts(data, path))) from None
+    mappings, errors = _load_mappings(config.buses, config.devices, path.parent)
+    errors += secret_errors(config.mqtt)
     errors += _web_token_errors(config.bridge.web)
-    errors += _topic_errors(config, mappings)
-    errors += _folder_errors(config.bridge, path.parent)
+    errors += topic_errors(config.mqtt, config.devices, mappings)
+    errors += folder_errors(config.bridge, path.parent)
     if errors:
         raise ConfigError(str(path), errors)
     return LoadedConfig(path=path, config=config, mappings=mappings)
 
 
-def _load_mappings(config: Config, base: Path) -> tuple[dict[str, Mapping], list[str]]:
+def _errors_of_valid_parts(data: dict[str, Any], path: Path) -> list[str]:
+    """The checks beyond fields, run on the sections, buses and devices that validate on
+    their own (the invalid ones are reported already)."""
+    mqtt = _valid(MqttConfig, data.get("mqtt", {}))
+    bridge = _valid(ManagementConfig, data.get("bridge", {}))
+    raw_buses, raw_devices = _listed(data, "buses"), _listed(data, "devices")
+    buses = [bus for bus in (_valid(_BUS, item) for item in raw_buses) if bus is not None]
+    devices = [d for d in (_valid(DeviceConfig, item) for item in raw_devices) if d is not None]
+    valid_ids = {bus.id for bus in buses}
+    invalid = {b.get("id") for b in raw_buses if isinstance(b, dict)} - valid_ids
+    errors = reference_errors(buses, devices, invalid_buses={str(i) for i in invalid})
+    mappings, more = _load_mappings(buses, devices, path.parent)
+    errors += more
+    if mqtt is not None:
+        errors += secret_errors(mqtt) + topic_errors(mqtt, devices, mappings)
+    if bridge is not None:
+        errors += folder_errors(bridge, path.parent)
+    return errors
+
+
+def _listed(data: dict[str, Any], section: str) -> list[Any]:
+    items = data.get(section)
+    return items if isinstance(items, list) else []
+
+
+def _valid(model: Any, data: object) -> Any:
+    """``data`` validated as ``model`` (a model class or a TypeAdapter), or None."""
+    validate = model.validate_python if isinstance(model, TypeAdapter) else model.model_validate
+    try:
+        return validate(data)
+    except ValidationError:
+        return None
+
+
+_BUS: TypeAdapter[SerialBus | TcpBus] = TypeAdapter(Bus)
+
+
+def _load_mappings(
+    buses: Iterable[SerialBus | TcpBus], devices: Iterable[DeviceConfig], base: Path
+) -> tuple[dict[str, Mapping], list[str]]:
     loaded: dict[str, Mapping] = {}
     cache: dict[Path, Mapping] = {}
     errors: list[str] = []
-    buses = {bus.id: bus for bus in config.buses}
-    for device in config.devices:
-        mapping, problems = load_device_mapping(device, buses[device.bus], base, cache)
+    known = {bus.id: bus for bus in buses}
+    for device in devices:
+        if device.bus not in known:
+            continue  # reported as a reference
+        mapping, problems = load_device_mapping(device, known[device.bus], base, cache)
         errors += problems
         if mapping is not None:
             loaded[device.id] = mapping
@@ -495,45 +509,6 @@ def load_device_mapping(
     return mapping, errors
 
 
-def _topic_errors(config: Config, mappings: dict[str, Mapping]) -> list[str]:
-    """Devices whose longest topic (a discovery config or a command) would exceed MQTT's
-    limit, so that the broker would refuse it at run time."""
-    mqtt, errors = config.mqtt, []
-    for device in config.devices:
-        mapping = mappings.get(device.id)
-        if mapping is None:
-            continue
-        key = max(mapping.entities, key=len, default="")
-        longest = max(
-            f"{mqtt.base_topic}/{device.id}/{key}/set",
-            f"{mqtt.discovery_prefix}/{_LONGEST_COMPONENT}/{device.id}/{key}/config",
-            key=lambda topic: len(topic.encode("utf-8")),
-        )
-        size = len(longest.encode("utf-8"))
-        if size > MAX_TOPIC_BYTES:
-            errors.append(
-                f"devices.{device.id}.id: its topics would be {size} bytes, over MQTT's "
-                f"{MAX_TOPIC_BYTES}; shorten the id or the mapping's keys"
-            )
-    return errors
-
-
-def _folder_errors(bridge: ManagementConfig, base: Path) -> list[str]:
-    return [
-        f"bridge.mapping_dirs: no such folder {str(folder)!r}"
-        for folder in bridge.mapping_dirs
-        if not (base / folder).is_dir()
-    ]
-
-
-def _secret_errors(mqtt: MqttConfig) -> list[str]:
-    if mqtt.password_file is not None and not mqtt.password_file.is_file():
-        return [f"mqtt.password_file: no such file {str(mqtt.password_file)!r}"]
-    if mqtt.password_env is not None and mqtt.password_env not in os.environ:
-        return [f"mqtt.password_env: environment variable {mqtt.password_env} is not set"]
-    return []
-
-
 def _web_token_errors(web: WebConfig) -> list[str]:
     if not web.enabled or (web.token_file is None and web.token_env is None):
         return []
@@ -545,22 +520,6 @@ def _web_token_errors(web: WebConfig) -> list[str]:
     if len(token) < MIN_TOKEN:
         return [f"{where}: the token is missing or shorter than {MIN_TOKEN} characters"]
     return []
-
-
-def _with_ids(rows: Iterable[str], data: dict[str, Any]) -> list[str]:
-    """Replace list indexes by ids: ``devices.0.unit`` -> ``devices.borehole_pump.unit``."""
-    result = []
-    for row in rows:
-        location, sep, message = row.partition(": ")
-        parts = location.split(".")
-        items = data.get(parts[0])
-        if len(parts) > 1 and parts[1].isdigit() and isinstance(items, list):
-            index = int(parts[1])
-            item = items[index] if index < len(items) else None
-            if isinstance(item, dict) and isinstance(item.get("id"), str) and item["id"]:
-                parts[1] = item["id"]
-        result.append(".".join(parts) + sep + message)
-    return result
 
 
 def config_schema() -> dict[str, Any]:

@@ -59,11 +59,11 @@ def write_function(entity: Entity, protocol: Protocol) -> int:
 
 def check_mapping(mapping: Mapping) -> list[str]:
     """Every cross-entity problem of ``mapping``, as ``location: message`` rows."""
-    rows: list[str] = []
-    checks = (_keys, _addresses, _options, _references, _function_codes, _sentinels, _presentation)
-    for check in checks:
+    basis = [*_addresses(mapping), *_options(mapping)]
+    rows = [*_keys(mapping), *basis]
+    for check in (_references, _function_codes, _sentinels, _presentation):
         rows.extend(check(mapping))
-    if not rows:  # overlap checks need valid addresses and options
+    if not basis:  # overlap checks need valid addresses and options, nothing else
         rows.extend(_overlaps(mapping))
     if mapping.status is not None and mapping.status not in mapping.entities:
         rows.append(f"status: no entity {mapping.status!r}")

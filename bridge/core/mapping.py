@@ -188,7 +188,33 @@ def parse_mapping(text: str, source: str) -> Mapping:
     try:
         return Mapping.model_validate(data)
     except ValidationError as exc:
-        raise MappingError(source, list(format_validation_errors(exc))) from None
+        rows = list(format_validation_errors(exc))
+    rows += _whole_mapping_rows(data, rows)
+    raise MappingError(source, list(dict.fromkeys(rows)))
+
+
+def _whole_mapping_rows(data: dict[str, Any], rows: list[str]) -> list[str]:
+    """When only some entities are invalid, the checks across entities (references,
+    overlaps, function codes...) still run on the valid ones, so that a file's problems
+    are reported in one run. References to an invalid entity are not reported twice."""
+    entities = data.get("entities")
+    if not isinstance(entities, dict) or any(not r.startswith("entities.") for r in rows):
+        return []  # the header or protocol is wrong: checks across entities would guess
+    valid, invalid = {}, set()
+    for key, raw in entities.items():
+        try:
+            Entity.model_validate(raw)
+            valid[key] = raw
+        except ValidationError:
+            invalid.add(key)
+    if not valid or not invalid:
+        return []
+    try:
+        Mapping.model_validate(data | {"entities": valid})
+    except ValidationError as exc:
+        gone = tuple(f"no entity {key!r}" for key in invalid)
+        return [row for row in format_validation_errors(exc) if not row.endswith(gone)]
+    return []
 
 
 def load_mapping(path: Path) -> Mapping:

@@ -146,6 +146,34 @@ def test_two_devices_on_one_unit(tmp_path: Path) -> None:
     assert issues(tmp_path, text) == ("devices.pump2.unit: unit 1 is also 'pump' on rs485",)
 
 
+def test_every_problem_in_one_run(tmp_path: Path) -> None:
+    """Field errors do not hide what the valid parts show: references, options, mapping
+    files, secrets; a device on a bus that exists but is invalid is not told 'no bus'."""
+    text = """
+mqtt: {password_env: NOT_SET_IN_TESTS}
+bridge: {mapping_dirs: [nowhere]}
+buses:
+  - {id: rs485, transport: rtu, port: /dev/ttyUSB0}
+  - {id: gw, transport: tcp, host: 192.0.2.1, tcp_port: 0}
+devices:
+  - {id: pump, bus: rs485, unit: 1, mapping: t1.yaml, options: {model: c}}
+  - {id: pump2, bus: rs485, unit: 1, mapping: t1.yaml}
+  - {id: drive, bus: gw, unit: 2, mapping: p2_vfd}
+  - {id: fan, bus: rs485, unit: 300, mapping: nothing.yaml}
+  - {id: meter, bus: rs458, unit: 4, mapping: t1.yaml}
+"""
+    rows = issues(tmp_path, text)
+    assert rows == (
+        "buses.gw.tcp.tcp_port: Input should be greater than or equal to 1",
+        "devices.fan.unit: Input should be less than or equal to 255",
+        "devices.pump2.unit: unit 1 is also 'pump' on rs485",
+        "devices.meter.bus: no bus 'rs458' (have ['rs485'])",
+        "devices.pump.options.model: 'c' is not one of ('a', 'b')",
+        "mqtt.password_env: environment variable NOT_SET_IN_TESTS is not set",
+        "bridge.mapping_dirs: no such folder 'nowhere'",
+    )
+
+
 def test_disabled_device_may_share_a_unit(tmp_path: Path) -> None:
     text = BASE + "  - {id: old, bus: rs485, unit: 1, mapping: t1.yaml, enabled: false}\n"
     assert load_config(write(tmp_path, text)).config.devices[1].enabled is False

@@ -435,6 +435,47 @@ def test_load_error_names_file_entity_and_field(tmp_path: Path) -> None:
     assert str(path) in str(caught.value)
 
 
+def test_every_problem_of_a_file_in_one_run() -> None:
+    """A bad field in one entity does not hide a bad reference or an overlap elsewhere;
+    a reference to the bad entity is not reported as missing (it is there, and wrong)."""
+    text = (
+        HEADER
+        + """
+status: state
+entities:
+  speed: {name: Speed, address: 1, scale: zero}
+  level: {name: Level, address: 2, unit_from: units}
+  limit: {name: Limit, address: 3, max_from: speed}
+  state: {name: State, address: 4, enum: {0: stop, 1: run}}
+  twin: {name: Twin, address: 4}
+"""
+    )
+    with pytest.raises(MappingError) as caught:
+        parse_mapping(text, "pump.yaml")
+    assert caught.value.issues == (
+        "entities.speed.scale: Input should be a valid number, unable to parse string as a number",
+        "entities.level.unit_from: no entity 'units'",
+        "entities.twin.address: a second whole value on the same register with 'state' at holding 4",
+    )
+
+
+def test_a_bad_header_is_reported_without_guesses_about_the_entities() -> None:
+    text = (
+        HEADER.replace("model: T1", "model: [T1]")
+        + """
+entities:
+  speed: {name: Speed, address: 1, scale: zero}
+  level: {name: Level, address: 2, unit_from: units}
+"""
+    )
+    with pytest.raises(MappingError) as caught:
+        parse_mapping(text, "pump.yaml")
+    assert [issue.split(":")[0] for issue in caught.value.issues] == [
+        "model",
+        "entities.speed.scale",
+    ]
+
+
 def test_duplicate_keys_are_refused() -> None:
     text = HEADER + "entities:\n  speed: {name: A, address: 1}\n  speed: {name: B, address: 2}\n"
     with pytest.raises(MappingError, match="duplicate key 'speed'"):
