@@ -12,13 +12,17 @@ message loop. Home Assistant's ``online`` asks for one republish, half a second 
 (however many arrive meanwhile). At most ``MAX_REQUESTS`` management requests run at a time.
 Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
 optional metrics endpoint serves the same counters for the whole run, and the optional
-web page (bridge/web) shows the same values, health and refusals, fed by ``feed``.
+web page (bridge/web) shows the same values, health and refusals, fed by ``feed``. A clean
+stop (Ctrl-C, SIGTERM) sets every device's availability ``offline`` before
+``bridge/state`` goes ``offline``; the demo (``remove_on_stop``) empties every retained
+message it published.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import logging
 from collections import deque
@@ -55,9 +59,10 @@ MAX_REQUESTS = 8  # management requests running at a time; more are answered "bu
 class Bridge:
     """One config's buses and devices, published over one MQTT connection."""
 
-    def __init__(self, loaded: LoadedConfig) -> None:
+    def __init__(self, loaded: LoadedConfig, *, remove_on_stop: bool = False) -> None:
         config = loaded.config
         self.loaded = loaded
+        self.remove_on_stop = remove_on_stop  # the demo: leave nothing on the broker
         self.mqtt = config.mqtt
         self.topics = Topics(config.mqtt.base_topic, config.mqtt.discovery_prefix)
         self.origin = Origin(sw_version=__version__)
@@ -108,6 +113,9 @@ class Bridge:
     async def _session(self, client: MqttClient) -> None:
         """One connection: subscribe, clean up, publish everything, then serve."""
         topics = self.topics
+        client.farewell = functools.partial(self._farewell, client)
+        if self.remove_on_stop:
+            client.goodbye = b""
         commands = (*topics.command_filters(), topics.bridge_requests)
         await client.subscribe(*commands, qos=max(1, self.mqtt.qos), live_only=True)
         await client.subscribe(topics.ha_status, qos=max(1, self.mqtt.qos))
@@ -124,6 +132,20 @@ class Bridge:
                     self._handle(message)
         except ExceptionGroup as failed:
             raise _first(failed) from None
+
+    def _farewell(self, client: MqttClient) -> list[tuple[str, str]]:
+        """What a clean stop publishes before ``bridge/state`` goes offline: each device
+        offline (plain MQTT clients and Node-RED see it, not only Home Assistant), or, with
+        ``remove_on_stop``, an empty retained message on every topic this session left one
+        on, discovery configs first (Home Assistant removes the devices)."""
+        if not self.remove_on_stop:
+            return [(self.topics.availability(d), "offline") for d in self.engine.devices]
+        prefix = f"{self.topics.discovery_prefix}/"
+        left = sorted(client.retained_topics - {self.topics.bridge_state})
+        ordered = [t for t in left if t.startswith(prefix)] + [
+            t for t in left if not t.startswith(prefix)
+        ]
+        return [(topic, "") for topic in ordered]
 
     async def _publisher(self, client: MqttClient) -> None:
         while True:

@@ -4,7 +4,11 @@
 (mqtt:// or mqtts://, user name and password, MQTT 5 with a fallback to 3.1.1 when the
 broker refuses 5 or takes the connection but never answers an MQTT 5 CONNECT, as amqtt
 does), sets the Last Will ``offline`` (retained, QoS 1) on the will topic and
-publishes ``online`` there; leaving publishes ``offline`` and disconnects cleanly. Incoming
+publishes ``online`` there; leaving cleanly (the session returned or was cancelled: a
+stop) publishes the caller's ``farewell`` messages (retained: devices going offline, or
+empty payloads that remove what the session published, ``retained_topics``), then
+``goodbye`` on the will topic (``offline``; empty removes it), within ``FAREWELL_TIMEOUT``
+seconds, and disconnects. Incoming
 messages are ``Message`` values, decoupled from paho. The caller owns the reconnect loop;
 ``run_with_reconnect`` is that loop, with a capped exponential backoff; once a broker
 needed the fallback, its reconnects ask for 3.1.1 at once.
@@ -65,6 +69,7 @@ OFFLINE = b"offline"
 _UNSUPPORTED_PROTOCOL_VERSION = 0x84  # CONNACK reason code (3.1.1 return code 1 maps to it)
 _TIMEOUT = 10.0  # seconds for CONNACK, PUBACK, SUBACK, UNSUBACK
 _CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
+FAREWELL_TIMEOUT = 5.0  # seconds for the farewell messages and the goodbye, at most
 _FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
 
@@ -187,6 +192,9 @@ class MqttClient:
         self._connection: _Connection | None = None
         self._protocol: str | None = None
         self._filters: set[str] = set()
+        self.retained_topics: set[str] = set()  # retained messages this session left there
+        self.farewell: Callable[[], Iterable[tuple[str, str]]] | None = None
+        self.goodbye = OFFLINE  # the will topic's last message at a clean close
 
     @property
     def protocol(self) -> str:
@@ -284,13 +292,34 @@ class MqttClient:
         self._filters.clear()
         if connection is None:
             return
+        stopping = exc_type is None or issubclass(exc_type, asyncio.CancelledError)
         try:
-            await connection.publish(self._will_topic, OFFLINE, 1, True, timeout=_CLOSE_TIMEOUT)
+            if stopping:
+                farewell = list(self.farewell()) if self.farewell is not None else []
+                await self._say_farewell(connection, farewell)
+            else:
+                await connection.publish(self._will_topic, OFFLINE, 1, True, timeout=_CLOSE_TIMEOUT)
             await connection.__aexit__(exc_type, exc, tb)
         except aiomqtt.MqttError as error:  # already lost: the broker publishes the will
             _log.debug("no clean MQTT disconnect: %s", error)
         finally:
             connection.abort()  # no-op after a clean DISCONNECT; closes a stuck socket
+
+    async def _say_farewell(self, connection: _Connection, messages: list[tuple[str, str]]) -> None:
+        """The farewell messages, then the goodbye, within FAREWELL_TIMEOUT seconds."""
+        try:
+            async with asyncio.timeout(FAREWELL_TIMEOUT):
+                for topic, payload in messages:
+                    await connection.publish(topic, payload, 1, True, timeout=_CLOSE_TIMEOUT)
+                await connection.publish(
+                    self._will_topic, self.goodbye, 1, True, timeout=_CLOSE_TIMEOUT
+                )
+        except TimeoutError:
+            _log.warning(
+                "MQTT: the broker took over %gs for the last %d messages; not all were sent",
+                FAREWELL_TIMEOUT,
+                len(messages) + 1,
+            )
 
     def _require(self) -> _Connection:
         if self._connection is None:
@@ -304,6 +333,10 @@ class MqttClient:
         acknowledgement."""
         connection = self._require()
         level = self._config.qos if qos is None else qos
+        if retain and payload:
+            self.retained_topics.add(topic)
+        elif retain:
+            self.retained_topics.discard(topic)
         try:
             await connection.publish(topic, payload, level, retain)
         except aiomqtt.MqttError as exc:
