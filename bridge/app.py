@@ -59,10 +59,13 @@ MAX_REQUESTS = 8  # management requests running at a time; more are answered "bu
 class Bridge:
     """One config's buses and devices, published over one MQTT connection."""
 
-    def __init__(self, loaded: LoadedConfig, *, remove_on_stop: bool = False) -> None:
+    def __init__(
+        self, loaded: LoadedConfig, *, remove_on_stop: bool = False, must_connect: bool = False
+    ) -> None:
         config = loaded.config
         self.loaded = loaded
         self.remove_on_stop = remove_on_stop  # the demo: leave nothing on the broker
+        self.must_connect = must_connect  # the demo: a first connect that fails ends run()
         self.mqtt = config.mqtt
         self.topics = Topics(config.mqtt.base_topic, config.mqtt.discovery_prefix)
         self.origin = Origin(sw_version=__version__)
@@ -102,7 +105,11 @@ class Bridge:
             group.create_task(self.engine.run(), name="engine")
             group.create_task(
                 run_with_reconnect(
-                    self.mqtt, self.topics.bridge_state, self._session, on_state=self._mqtt_is
+                    self.mqtt,
+                    self.topics.bridge_state,
+                    self._session,
+                    on_state=self._mqtt_is,
+                    first_connect_required=self.must_connect,
                 ),
                 name="mqtt",
             )

@@ -21,12 +21,13 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from bridge.app import Bridge
-from bridge.config import LoadedConfig, load_config_data
+from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.demo_view import DemoView, render_plain, render_table
-from bridge.errors import BridgeError, InputError
+from bridge.errors import BridgeError, ConfigError, InputError
 from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.modbus.simulator import SimulatedUnit, Simulator
+from bridge.mqtt import MqttConnectError
 from bridge.mqtt.broker import PROTOCOL, embedded_broker
 
 DESCRIPTION = """\
@@ -73,7 +74,21 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    demo.add_argument("--mqtt-url", metavar="URL", help="broker to use (mqtt://host:port)")
+    demo.add_argument(
+        "--mqtt-url",
+        metavar="URL",
+        help="broker to use: mqtt://host:port (mqtt://user:password@host:port logs in; the "
+        "password is shown nowhere)",
+    )
+    login = demo.add_argument_group("broker login (as mqtt.username, password_file, password_env)")
+    login.add_argument("--username", metavar="NAME", help="user name on the broker")
+    secret = login.add_mutually_exclusive_group()
+    secret.add_argument(
+        "--password-file", type=Path, metavar="FILE", help="file holding the password"
+    )
+    secret.add_argument(
+        "--password-env", metavar="VARIABLE", help="environment variable holding the password"
+    )
     demo.add_argument(
         "--modbus-port",
         type=int,
@@ -91,6 +106,12 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     demo.add_argument("--base-topic", default="modbus", metavar="TOPIC")
     demo.add_argument(
+        "--keep",
+        action="store_true",
+        help="leave the devices on the broker at the end (default: Ctrl-C removes their "
+        "discovery configs and retained state, so Home Assistant forgets them)",
+    )
+    demo.add_argument(
         "--plain", action="store_true", help="print state changes as lines, no live table"
     )
     add_logging_arguments(demo, level="warning")
@@ -101,6 +122,8 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
     host, _, port = args.local_broker.rpartition(":")
     if not host or not port.isdigit():
         raise InputError("--local-broker", [f"use HOST:PORT, not {args.local_broker!r}"])
+    url = args.mqtt_url or f"mqtt://{args.local_broker}"
+    demo_config(BrokerChoice(url, "given"), DEFAULT_MODBUS_PORT, args)  # refuse bad options now
     configure_logging(args.log_level, args.log_format)
     try:
         asyncio.run(until_stopped(demo(args, out)))
@@ -110,7 +133,8 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
             raise
         print(f"error: {reason}", file=sys.stderr)
         return 1
-    print("demo stopped", file=out, flush=True)
+    gone = "kept on the broker (--keep)" if args.keep else "removed from the broker"
+    print(f"demo stopped; its devices were {gone}", file=out, flush=True)
     return 0
 
 
@@ -136,28 +160,94 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
             await simulator.ready.wait()
         async with _broker(args.mqtt_url, args.local_broker) as broker:
             web_port = _free_port(DEFAULT_WEB_PORT)
-            loaded = demo_config(broker, simulator.port, args.base_topic, web_port)
-            bridge = Bridge(loaded)
-            view = DemoView(bridge, broker_url=broker.url, broker_how=broker.how)
+            loaded = demo_config(broker, simulator.port, args, web_port)
+            bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
+            mqtt = loaded.config.mqtt
+            view = DemoView(bridge, broker_url=mqtt.url, broker_how=_how(broker, mqtt))
             view.modbus = f"{LOOPBACK}:{simulator.port}"
-            async with asyncio.TaskGroup() as inner:
-                inner.create_task(bridge.run(), name="bridge")
-                show = _show_plain if args.plain or not out.isatty() else _show_live
-                await show(view, out)
+            try:
+                async with asyncio.TaskGroup() as inner:
+                    inner.create_task(bridge.run(), name="bridge")
+                    show = _show_plain if args.plain or not out.isatty() else _show_live
+                    await show(view, out)
+            except* MqttConnectError as failed:
+                raise DemoBrokerError(_advice(_first_leaf(failed), broker)) from None
+
+
+class DemoBrokerError(BridgeError):
+    """The broker the demo chose cannot be used (unreachable, login refused)."""
+
+
+def _first_leaf(group: BaseExceptionGroup[Exception]) -> Exception:
+    first = group.exceptions[0]
+    return _first_leaf(first) if isinstance(first, BaseExceptionGroup) else first
+
+
+def _how(broker: BrokerChoice, mqtt: MqttConfig) -> str:
+    """``local``, ``given, user bridge``: how the broker was chosen, and the login."""
+    return broker.how + (f", user {mqtt.username}" if mqtt.username else "")
+
+
+def _advice(failure: Exception, broker: BrokerChoice) -> str:
+    """Why the demo cannot use the broker, and what to do, said once."""
+    if isinstance(failure, MqttConnectError) and failure.code is not None:  # a CONNACK: login
+        hint = "log in with --username and --password-file or --password-env"
+    elif broker.how == "given":
+        hint = "check --mqtt-url, or leave it out to use a local or an embedded broker"
+    else:
+        hint = "name another broker with --mqtt-url or --local-broker HOST:PORT"
+    return f"{failure}\n  {hint}"
 
 
 def demo_config(
-    broker: BrokerChoice, modbus_port: int, base_topic: str, web_port: int = DEFAULT_WEB_PORT
+    broker: BrokerChoice,
+    modbus_port: int,
+    args: argparse.Namespace,
+    web_port: int = DEFAULT_WEB_PORT,
 ) -> LoadedConfig:
-    """The bridge config of the demo: the five seed devices on one loopback TCP bus, and
-    the web page on loopback."""
+    """The bridge config of the demo: the five seed devices on one loopback TCP bus, the
+    web page on loopback, and the broker with the login options (validated like a config
+    file's ``mqtt`` section; errors name the options)."""
+    login = {
+        "username": args.username,
+        "password_file": args.password_file,
+        "password_env": args.password_env,
+    }
+    if broker.how == "embedded":  # anonymous: the login options are for a real broker
+        login = {}
+    mqtt: dict[str, Any] = {
+        "url": broker.url,
+        "version": broker.protocol,
+        "base_topic": args.base_topic,
+        "client_id": f"modbus-mqtt-bridge-demo-{modbus_port}",
+    } | {name: value for name, value in login.items() if value is not None}
+    try:
+        return _seeds_config(mqtt, modbus_port, web_port)
+    except ConfigError as exc:
+        raise InputError("demo", [_as_option(issue) for issue in exc.issues]) from None
+
+
+def _as_option(issue: str) -> str:
+    """``mqtt.password_env: ...`` as the option a user gave: ``--password-env: ...``."""
+    location, sep, message = issue.partition(": ")
+    field = location.removeprefix("mqtt.")
+    if location.startswith("mqtt.") and field in _OPTIONS:
+        return f"{_OPTIONS[field]}{sep}{message}"
+    return issue
+
+
+_OPTIONS = {
+    "url": "--mqtt-url",
+    "username": "--username",
+    "password_file": "--password-file",
+    "password_env": "--password-env",
+    "base_topic": "--base-topic",
+}
+
+
+def _seeds_config(mqtt: dict[str, Any], modbus_port: int, web_port: int) -> LoadedConfig:
     data: dict[str, Any] = {
-        "mqtt": {
-            "url": broker.url,
-            "version": broker.protocol,
-            "base_topic": base_topic,
-            "client_id": f"modbus-mqtt-bridge-demo-{modbus_port}",
-        },
+        "mqtt": mqtt,
         "bridge": {"web": {"enabled": True, "port": web_port}},
         "buses": [
             {

@@ -523,6 +523,7 @@ async def run_with_reconnect(
     *,
     backoff: ReconnectBackoff | None = None,
     on_state: Callable[[str], None] | None = None,
+    first_connect_required: bool = False,
 ) -> None:
     """Run ``session`` on a connected client, reconnecting for as long as it takes.
 
@@ -534,16 +535,19 @@ async def run_with_reconnect(
     lost. Returns when ``session`` returns; any error other than
     MqttConnectError/MqttDisconnectedError propagates. Each connect is logged at INFO
     (broker and protocol); an outage is logged once when it starts (WARNING) and once
-    when it ends.
+    when it ends. ``first_connect_required`` (the demo): a first connect that fails raises
+    its MqttConnectError instead of retrying, so a wrong URL or login is said once, not
+    retried forever.
     """
     backoff = backoff or ReconnectBackoff()
     outage: str | None = None
     version: str | None = None  # what the broker answered last time
+    ever_connected = False
     while True:
         connected = False
         try:
             async with MqttClient(config, will_topic=will_topic, version=version) as client:
-                connected = True
+                connected = ever_connected = True
                 version = client.protocol
                 backoff.connected(time.monotonic())
                 _log.info(
@@ -559,7 +563,10 @@ async def run_with_reconnect(
                 await session(client)
             return
         except* (MqttConnectError, MqttDisconnectedError) as group:
-            reason = str(group.exceptions[0])
+            failure = group.exceptions[0]
+            if first_connect_required and not ever_connected:
+                raise failure from None
+            reason = str(failure)
         if connected and on_state is not None:
             on_state("offline")
         delay = backoff.failed(time.monotonic())

@@ -22,6 +22,7 @@ import pytest
 from bridge.config import MqttConfig
 from bridge.demo import SEEDS
 from bridge.mqtt import MqttClient
+from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.mosquitto import Broker
 from tests.integration.test_simulate_cli import free_port
 
@@ -29,10 +30,14 @@ DEVICES = {seed.id for seed in SEEDS}
 
 
 @contextmanager
-def demo(*args: str) -> Iterator[subprocess.Popen[str]]:
+def demo(*args: str, env: dict[str, str] | None = None) -> Iterator[subprocess.Popen[str]]:
     command = [sys.executable, "-m", "bridge.cli", "demo", "--plain", "--modbus-port", "0"]
     with subprocess.Popen(
-        [*command, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [*command, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=None if env is None else os.environ | env,
     ) as process:
         try:
             yield process
@@ -62,8 +67,8 @@ async def stop(process: subprocess.Popen[str]) -> str:
     return out
 
 
-async def retained(url: str, pattern: str, version: str = "5") -> dict[str, bytes]:
-    config = MqttConfig(url=url, version=version)  # type: ignore[arg-type]
+async def retained(url: str, pattern: str, version: str = "5", **login: str) -> dict[str, bytes]:
+    config = MqttConfig(url=url, version=version, **login)  # type: ignore[arg-type]
     async with MqttClient(config, will_topic="observer/state", client_id="observer") as client:
         return await client.retained(pattern)
 
@@ -79,12 +84,13 @@ def discovered(configs: dict[str, bytes]) -> set[str]:
     return found - {"modbus"}
 
 
-async def discovery_of_every_device(url: str, version: str = "5") -> None:
+async def discovery_of_every_device(url: str, version: str = "5", **login: str) -> None:
     """Every seed device's discovery config arrives (bounded)."""
     found: set[str] = set()
     async with asyncio.timeout(15):
         while found != DEVICES:
-            found = discovered(await retained(url, "homeassistant/device/+/config", version))
+            pattern = "homeassistant/device/+/config"
+            found = discovered(await retained(url, pattern, version, **login))
             await asyncio.sleep(0.2)
 
 
@@ -104,9 +110,61 @@ async def test_demo_on_a_given_broker_publishes_five_devices_and_stops(
                 break
             await asyncio.sleep(0.2)
         assert "status" in json.loads(state["modbus/borehole_pump"])
-        assert (await stop(process)).rstrip().endswith("demo stopped")
-    after = await retained(mosquitto.url, "modbus/bridge/state")
-    assert after == {"modbus/bridge/state": b"offline"}
+        out = await stop(process)
+        assert out.rstrip().endswith("demo stopped; its devices were removed from the broker")
+    # Home Assistant forgets the six devices: no discovery config, no retained state
+    assert await retained(mosquitto.url, "homeassistant/#") == {}
+    assert await retained(mosquitto.url, "modbus/#") == {}
+
+
+@pytest.mark.asyncio
+async def test_demo_logs_in_with_the_config_options_and_keeps_its_devices_if_asked(
+    mosquitto_auth: Broker,
+) -> None:
+    """``--username`` and ``--password-env`` as in a config's mqtt section; ``--keep``
+    leaves the devices (offline) on the broker; the password is printed nowhere."""
+    env = {"DEMO_TEST_PASSWORD": BROKER_PASSWORD}
+    login = ("--username", BROKER_USER, "--password-env", "DEMO_TEST_PASSWORD", "--keep")
+    with demo("--mqtt-url", mosquitto_auth.url, *login, env=env) as process:
+        lines = await read_until(process, "ready:")
+        assert f"MQTT broker: {mosquitto_auth.url} (given, user {BROKER_USER})" in lines
+        await discovery_of_every_device(
+            mosquitto_auth.url, username=BROKER_USER, password=BROKER_PASSWORD
+        )
+        out = await stop(process)
+        assert out.rstrip().endswith("demo stopped; its devices were kept on the broker (--keep)")
+        assert BROKER_PASSWORD not in "\n".join(lines) + out
+    credentials = {"username": BROKER_USER, "password": BROKER_PASSWORD}
+    configs = await retained(mosquitto_auth.url, "homeassistant/device/+/config", **credentials)
+    assert discovered(configs) == DEVICES
+    kept = await retained(mosquitto_auth.url, "modbus/+/availability", **credentials)
+    assert kept == {f"modbus/{d}/availability": b"offline" for d in DEVICES}
+
+
+@pytest.mark.asyncio
+async def test_demo_with_a_refused_login_says_so_once_and_masks_the_password(
+    mosquitto_auth: Broker,
+) -> None:
+    url = f"mqtt://{BROKER_USER}:wrong-secret@127.0.0.1:{mosquitto_auth.port}"
+    with demo("--mqtt-url", url) as process:
+        _, err = await asyncio.wait_for(asyncio.to_thread(process.communicate), 30)
+    assert process.returncode == 1
+    assert "wrong-secret" not in err
+    assert err.count("refused the connection") == 1, err
+    assert "log in with --username and --password-file or --password-env" in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.asyncio
+async def test_demo_on_a_closed_port_says_so_once() -> None:
+    port = free_port()
+    with demo("--mqtt-url", f"mqtt://127.0.0.1:{port}") as process:
+        _, err = await asyncio.wait_for(asyncio.to_thread(process.communicate), 30)
+    assert process.returncode == 1
+    assert err.splitlines() == [
+        f"error: cannot connect to mqtt://127.0.0.1:{port}: [Errno 111] Connection refused",
+        "  check --mqtt-url, or leave it out to use a local or an embedded broker",
+    ]
 
 
 @pytest.mark.asyncio
