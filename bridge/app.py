@@ -214,7 +214,7 @@ class Bridge:
         await client.publish_many(burst)
         for device_id, keys in dirty.items():
             poller = self.engine.devices[device_id]
-            if keys & self.discovery.sources(poller):
+            if self.discovery.due(poller, keys):
                 await self.discovery.publish(client, only=device_id)
         if devices_changed:
             await self._publish_devices_list(client)

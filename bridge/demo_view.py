@@ -87,7 +87,8 @@ def render_plain(view: DemoView) -> Iterator[str]:
                 f"{len(published(poller.points))} values on {bridge.topics.device(device_id)})"
             )
     states = {_state(p) for p in bridge.engine.devices.values()}
-    if "ready" not in view._said and states == {"online"} and bridge.mqtt_state == "online":
+    announced = bridge.mqtt_state == "online" and not bridge.discovery.pending
+    if "ready" not in view._said and states == {"online"} and announced:
         view._said["ready"] = "yes"
         yield f"ready: {len(bridge.engine.devices)} devices online, publishing to MQTT"
 

@@ -1,14 +1,20 @@
 """Home Assistant discovery as the bridge publishes it: built from the live pollers (units
 and limits read from registers), republished when those change, stale configs emptied.
 
-``DiscoveryPublisher.publish(client)`` sends the bridge device and every device; with
-``only=device_id`` just that device, and only when its payload changed; with
+A device whose discovery depends on registers (``unit_from``, ``min_from``, ``max_from``)
+is published once its first poll has read them (or found the device silent), never
+before with placeholder units and limits: Home Assistant would create its entities
+without units. Devices without such entities are published at once.
+
+``DiscoveryPublisher.publish(client)`` sends the bridge device and every ready device;
+with ``only=device_id`` just that device, and only when its payload changed; with
 ``clear_stale`` the retained configs this bridge published before but no longer produces
-(a removed device or entity) are emptied after. Those are found two ways: the retained
-configs under the discovery prefix that carry this bridge's identifiers, and the list of
-topics the last full publish recorded, retained on ``<base>/bridge/discovery``, which is
-read by its exact name: RabbitMQ sends no retained message to a subscription with a
-wildcard, so the first way finds nothing there.
+(a removed device or entity) are emptied after (a device not ready yet keeps its config).
+Those are found two ways: the retained configs under the discovery prefix that carry this
+bridge's identifiers, and the list of topics the last full publish recorded, retained on
+``<base>/bridge/discovery``, which is read by its exact name: RabbitMQ sends no retained
+message to a subscription with a wildcard, so the first way finds nothing there.
+``due(poller, changed)`` says whether a poll's changes call for ``publish(only=...)``.
 """
 
 from __future__ import annotations
@@ -53,6 +59,24 @@ class DiscoveryPublisher:
     def forget(self, device_id: str) -> None:
         """Build the device's discovery afresh next time (its mapping changed)."""
         self._sent.pop(device_id, None)
+
+    def ready(self, poller: DevicePoller) -> bool:
+        """True when the device's discovery has what it depends on (or depends on nothing)."""
+        return poller.first_poll_done or not self.sources(poller)
+
+    def due(self, poller: DevicePoller, changed: set[str]) -> bool:
+        """True when a poll's changes may change what this device's discovery says: it just
+        became ready, or a unit or limit register changed."""
+        if poller.device.id not in self._sent:
+            return self.ready(poller)
+        return bool(changed & self.sources(poller))
+
+    @property
+    def pending(self) -> list[str]:
+        """Devices whose discovery waits for their first poll."""
+        if self._mqtt.discovery == "off":
+            return []
+        return [d for d in self.engine.devices if d not in self._sent]
 
     def _device_info(self, poller: DevicePoller) -> DeviceInfo:
         device = poller.device
@@ -119,6 +143,9 @@ class DiscoveryPublisher:
             if only is not None and device_id != only:
                 continue
             messages = self.discovery_for(poller)
+            current.update(m.topic for m in messages)  # not ready yet: its config stays
+            if not self.ready(poller):
+                continue  # published after its first poll (Bridge._flush)
             digest = hash(tuple(messages))
             if only is not None and digest == self._sent.get(device_id):
                 return  # nothing changed

@@ -92,6 +92,7 @@ class DevicePoller:
         self._plans: dict[PollClass, tuple[Read, ...]] = {}
         self._limits_cache: ReadLimits | None = None
         self._polled_once = False
+        self.first_poll_done = False  # every class was asked once (answered or not)
         self._last_traffic = 0.0
 
     # --- polling ------------------------------------------------------------------
@@ -158,6 +159,9 @@ class DevicePoller:
             self._polled_once = True
         keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
         self.publish(keys, fresh)
+        if not self.first_poll_done and set(PollClass) <= chosen:
+            self.first_poll_done = True  # units and limits read (or not there): say so once
+            self._notify(frozenset())
 
     async def read_now(self, keys: Iterable[str] | None = None) -> dict[str, Value]:
         """Read these points (all when None) ahead of the polls; return their values."""

@@ -142,7 +142,7 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
                 timeout=20,
             )
             topic = f"homeassistant/device/{name}/config"
-            await eventually(lambda t=topic: t in observer.retained)  # after the values
+            await eventually(lambda t=topic: t in observer.retained)  # after the first poll
             config = observer.json(topic)
             assert config["device"]["identifiers"] == [f"modbus_{name}"]
             assert config["origin"]["name"] == "modbus-mqtt-bridge"
@@ -151,7 +151,6 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
                 assert component["unique_id"].startswith(f"modbus_{name}_"), key
                 assert "object_id" not in component, key
                 assert component.get("state_topic", f"modbus/{name}") == f"modbus/{name}", key
-            topic = f"homeassistant/device/{name}/config"
             await eventually(  # units and limits read from registers land in discovery
                 lambda p=poller, t=topic: (
                     observer.json(t) == json.loads(bridge.discovery.discovery_for(p)[0].payload)

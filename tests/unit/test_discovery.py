@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 import bridge
+from bridge.core.codec import limits_of, unit_of
 from bridge.core.discovery import (
     DeviceInfo,
     Origin,
@@ -29,6 +30,7 @@ from bridge.core.discovery import (
 )
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, build_health_report
 from bridge.core.mapping import Mapping, builtin_mapping_names, builtin_mapping_path, load_mapping
+from bridge.core.simulation import initial_image
 from bridge.core.topics import Topics
 from tests.factory import make_mapping
 
@@ -727,9 +729,26 @@ def _shipped(name: str) -> DeviceInfo:
     )
 
 
+def _as_read(device: DeviceInfo) -> dict[str, Any]:
+    """Units and limits as the bridge has them when it first publishes a device: read
+    from its registers (here: what a simulated unit holds at start)."""
+    points = device.mapping.points(device.options)
+    image = initial_image(device.mapping, points)
+    units = {k: unit_of(p, image) for k, p in points.items() if p.unit_source is not None}
+    limits = {
+        k: limits_of(p, image)
+        for k, p in points.items()
+        if p.min_source is not None or p.max_source is not None
+    }
+    return {"units": units, "limits": limits}
+
+
 @pytest.mark.parametrize("name", builtin_mapping_names())
 def test_shipped_mapping_snapshot(name: str) -> None:
-    _check_snapshot(name, build_device_discovery(_shipped(name), TOPICS, ORIGIN))
+    """What Home Assistant gets for each shipped mapping: one config, once, with the units
+    and limits read from the device (bridge/discovery_publisher.py waits for them)."""
+    device = _shipped(name)
+    _check_snapshot(name, build_device_discovery(device, TOPICS, ORIGIN, **_as_read(device)))
 
 
 def test_bridge_snapshot() -> None:
