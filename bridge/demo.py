@@ -165,6 +165,11 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
             mqtt = loaded.config.mqtt
             view = DemoView(bridge, broker_url=mqtt.url, broker_how=_how(broker, mqtt))
             view.modbus = f"{LOOPBACK}:{simulator.port}"
+            view.extra.append(
+                "Ctrl-C stops: the devices stay on the broker (--keep)"
+                if args.keep
+                else "Ctrl-C stops and removes the devices from the broker (--keep: keeps)"
+            )
             try:
                 async with asyncio.TaskGroup() as inner:
                     inner.create_task(bridge.run(), name="bridge")

@@ -200,10 +200,11 @@ def test_a_bad_local_broker_address_is_refused_before_anything_starts() -> None:
 
 @pytest.mark.asyncio
 async def test_demo_in_a_terminal_shows_the_live_table(mosquitto: Broker) -> None:
-    """On a terminal the default view is the live table: every device shows up online."""
+    """On a terminal the default view is the live table: every device shows up online, on
+    an 80x24 terminal too."""
     main, side = pty.openpty()
     command = [sys.executable, "-m", "bridge.cli", "demo", "--modbus-port", "0"]
-    env = os.environ | {"COLUMNS": "200", "LINES": "50", "TERM": "xterm"}
+    env = os.environ | {"COLUMNS": "80", "LINES": "24", "TERM": "xterm"}
     with subprocess.Popen(
         [*command, "--mqtt-url", mosquitto.url],
         stdout=side,
