@@ -26,7 +26,7 @@ import functools
 import json
 import logging
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from bridge import __version__
@@ -92,6 +92,8 @@ class Bridge:
             loaded, self.engine, on_reload=self._reloaded, mqtt_state=lambda: self.mqtt_state
         )
         self._republish = False  # after a mapping reload: info, discovery and state
+        # requests beyond the management API, by command (the demo's "demo/fault")
+        self.extra_requests: dict[str, Callable[[bytes], Awaitable[str]]] = {}
         self._ha_online = asyncio.Event()  # Home Assistant said online: republish soon
 
     # --- running ----------------------------------------------------------------------
@@ -323,7 +325,8 @@ class Bridge:
     async def _answer(self, command: str, payload: bytes) -> None:
         """Run one management request and queue its response."""
         try:
-            answer = await self.management.handle(command, payload)
+            extra = self.extra_requests.get(command)
+            answer = await (extra(payload) if extra else self.management.handle(command, payload))
         except Exception as exc:  # a request must never stop the bridge
             log.exception("management request %s failed", command[:200])
             answer = response(error=f"internal error: {exc}")

@@ -23,7 +23,8 @@ from typing import Any, TextIO
 from bridge.app import Bridge
 from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
-from bridge.demo_view import DemoView, render_plain, render_table
+from bridge.demo_control import FAULT_REQUEST, fault_request
+from bridge.demo_view import DemoView, mosquitto_options, render_plain, render_table
 from bridge.errors import BridgeError, ConfigError, InputError
 from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.modbus.simulator import SimulatedUnit, Simulator
@@ -162,9 +163,16 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
             web_port = _free_port(DEFAULT_WEB_PORT)
             loaded = demo_config(broker, simulator.port, args, web_port)
             bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
+            units = {seed.id: seed.unit for seed in SEEDS}
+            bridge.extra_requests[FAULT_REQUEST] = fault_request(simulator, units)
             mqtt = loaded.config.mqtt
             view = DemoView(bridge, broker_url=mqtt.url, broker_how=_how(broker, mqtt))
             view.modbus = f"{LOOPBACK}:{simulator.port}"
+            fault = f"{args.base_topic}/bridge/request/{FAULT_REQUEST}"
+            view.extra += [
+                f"fault:   mosquitto_pub{mosquitto_options(mqtt)} -t {fault} -m \\",
+                f"""           '{{"device": "{SEEDS[0].id}", "fault": "alarm_dry_running"}}'""",
+            ]
             view.extra.append(
                 "Ctrl-C stops: the devices stay on the broker (--keep)"
                 if args.keep

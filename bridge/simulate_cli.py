@@ -6,6 +6,7 @@
 
 ``--pty`` creates a virtual serial cable and prints the port the bridge should open.
 Quirks (``--latency``, ``--dead``, ``--max-read``...) reproduce real devices' behaviour.
+The devices follow their commands; ``--fault KEY[=LABEL]`` starts them tripped.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import asyncio
 from typing import TextIO
 
 from bridge.core.mapping import Mapping, load_mapping, resolve_mapping_path
-from bridge.errors import InputError
+from bridge.errors import InputError, ValueRejectedError
 from bridge.lifecycle import until_stopped
 from bridge.modbus.null_modem import null_modem
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
@@ -57,6 +58,14 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     sim.add_argument("--parity", choices=("N", "E", "O"), default="N")
     sim.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
     sim.add_argument("--tick", type=float, default=1.0, help="seconds between value changes")
+    sim.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KEY[=LABEL]",
+        help="start tripped: this alarm on (a fault code's LABEL) in every unit that has it; "
+        "the device's fault reset clears it (repeatable)",
+    )
     sim.add_argument("--seed", type=int, default=0)
     quirks = sim.add_argument_group("device quirks (every unit)")
     quirks.add_argument("--latency", type=float, default=0.0, help="seconds before each answer")
@@ -117,9 +126,29 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
         )
         units.append(SimulatedUnit(unit, mapping, mine, quirks))
     try:
-        return Simulator(units, seed=args.seed, tick=args.tick)
+        simulator = Simulator(units, seed=args.seed, tick=args.tick)
     except ValueError as exc:
         raise InputError("simulate", [str(exc)]) from None
+    _trip(simulator, [(spec.unit, spec.mapping) for spec in units], args.fault)
+    return simulator
+
+
+def _trip(simulator: Simulator, units: list[tuple[int, Mapping]], faults: list[str]) -> None:
+    """``--fault KEY[=LABEL]``: raised in every unit whose mapping has alarm KEY."""
+    problems = []
+    for fault in faults:
+        key, _, label = fault.partition("=")
+        having = [unit for unit, mapping in units if key in mapping.entities]
+        if not having:
+            alarms = sorted({k for _, m in units for k, e in m.entities.items() if e.alarm})
+            problems.append(f"--fault {key}: no simulated unit has it (alarms: {alarms})")
+        for unit in having:
+            try:
+                simulator.raise_fault(unit, key, label or None)
+            except ValueRejectedError as exc:
+                problems.append(f"--fault {fault}: {exc}")
+    if problems:
+        raise InputError("simulate", problems)
 
 
 def _option_problems(options: dict[str, str], mappings: list[Mapping]) -> list[str]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import random
+import re
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass
 
@@ -32,6 +33,7 @@ _COUNTER_START = 3000  # raw: "a few thousand"
 _SMALL_RAW = 100
 _FAULT_WORDS = ("fault", "alarm", "error", "trip", "fail")
 _TRUE_WORDS = ("ready", "normal")
+_NUMBERED = re.compile(r"^(.*?)_?(\d+)$")
 _AS_REGISTER = {  # a read-write copy of an entity, without limits, writing where it reads
     "access": Access.READ_WRITE,
     "press": None,
@@ -97,15 +99,35 @@ def initial_image(mapping: Mapping, points: AnyMapping[str, Point]) -> dict[Cell
     """Every readable cell of ``points``, holding a plausible value."""
     image = {(p.table, a): 0 for p in points.values() if p.entity.readable for a in p.span}
     roles = _limit_roles(points)
+    slots = _slots(points)
     for key, point in points.items():
         if not _owns_value(point, points):
             continue
         value = _initial_value(point, key == mapping.status, roles.get(key, ""))
+        if key in slots and point.entity.enum:  # history slots: one past alarm each
+            labels = list(point.entity.enum.values())
+            value = labels[slots[key] % len(labels)]
         image |= _nearest_storable(point, value, image)
     for _ in range(len(roles) + 1):  # limit chains settle in a few passes
         if not _respect_limits(points, image):
             break
     return image
+
+
+def _slots(points: AnyMapping[str, Point]) -> dict[str, int]:
+    """Keys of numbered enums sharing their labels (``alarm_history_1``..``_8``): their
+    place among them, so that each slot holds another label."""
+    families: dict[tuple[str, tuple[str, ...]], list[tuple[int, str]]] = {}
+    for key, point in points.items():
+        match = _NUMBERED.match(key)
+        if match and point.entity.enum and not point.entity.alarm:
+            labels = tuple(point.entity.enum.values())
+            families.setdefault((match.group(1), labels), []).append((int(match.group(2)), key))
+    slots: dict[str, int] = {}
+    for members in families.values():
+        if len(members) > 1:
+            slots |= {key: index for index, (_, key) in enumerate(sorted(members))}
+    return slots
 
 
 def _owns_value(point: Point, points: AnyMapping[str, Point]) -> bool:
@@ -163,7 +185,8 @@ def _initial_label(point: Point, is_status: bool) -> Value:
 
 
 def number_range(point: Point) -> tuple[float, float]:
-    """Engineering range a number can take: its register, narrowed by static min/max."""
+    """Engineering range a number can take: its register, narrowed by static min/max and
+    by physics (a power factor is within -1..1, or -100..100 %)."""
     entity = point.entity
     if entity.data_type is DataType.F32:
         low, high = -1e6, 1e6
@@ -172,6 +195,9 @@ def number_range(point: Point) -> tuple[float, float]:
         low, high = min(ends), max(ends)
     if point.sign is not None:
         low = -high
+    if entity.ha.device_class == "power_factor":
+        bound = 100.0 if entity.unit == "%" else 1.0
+        low, high = max(low, -bound), min(high, bound)
     if entity.min is not None:
         low = max(low, entity.min)
     if entity.max is not None:
@@ -183,6 +209,8 @@ def _plausible_number(point: Point, low: float, high: float) -> float:
     entity = point.entity
     if entity.ha.state_class in _COUNTER_CLASSES:
         return min(float(scale_value(entity, _COUNTER_START)), high)
+    if entity.ha.device_class == "power_factor":
+        return min(0.85 * (100 if entity.unit == "%" else 1), high)
     typical = _TYPICAL.get(entity.unit or "")
     if typical is not None and low <= typical <= high:
         return typical

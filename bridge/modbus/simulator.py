@@ -5,7 +5,9 @@ One ``Simulator`` serves any number of units (each a mapping, its options and it
 describes: the function codes it supports, its read limit, refused gaps and reserved
 addresses, its FC05 ON word, and at will a fixed exception code, latency, silence, or the
 P2's 2-byte byte count. Read-only measurements wander and counters count every ``tick``
-seconds (``tick <= 0``: values stay still); written registers keep what was written.
+seconds (``tick <= 0``: values stay still); written registers keep what was written. A unit
+follows its commands (start and stop change its status, a fault reset clears its faults)
+and ``raise_fault`` trips it (bridge/core/simulation_behaviour.py).
 
 The register image of each unit is ours (``bridge.core.simulation``); pymodbus' SimDevice
 blocks are only the buffers its ``action`` hook fills before each answer. They declare every
@@ -48,6 +50,7 @@ from bridge.core.mapping import Mapping, Point
 from bridge.core.request import Write
 from bridge.core.simulation import (
     Cell,
+    Mover,
     Quirks,
     advance,
     build_movers,
@@ -55,6 +58,15 @@ from bridge.core.simulation import (
     initial_image,
     stored_cells,
     words_for,
+)
+from bridge.core.simulation_behaviour import (
+    active_faults,
+    build_behaviour,
+    clear_faults,
+    follow,
+    is_running,
+    raise_fault,
+    start_image,
 )
 from bridge.modbus.frame import CoilWordRequest
 
@@ -118,6 +130,8 @@ class _Device:
         self.points = spec.mapping.points(spec.options)
         self.image = initial_image(spec.mapping, self.points)
         self.movers = build_movers(self.points, self.image)
+        self.behaviour = build_behaviour(spec.mapping, self.points, self.image)
+        self.image |= start_image(self.behaviour, self.image)
         self.quirks = spec.quirks
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
@@ -168,9 +182,18 @@ class _Device:
             write = Write(function_code, table, address, tuple(int(v) for v in values))
             self.record(self.unit, write, received)
             code = self._refusal(function_code) or self.rules.check_write(write)
-            if code is None and not (table is Table.COIL and address in self.rules.commands):
-                self.image |= stored_cells(write)
+            if code is None:
+                if not (table is Table.COIL and address in self.rules.commands):
+                    self.image |= stored_cells(write)
+                self.image |= follow(self.behaviour, write, self.image)  # start, stop, reset
         return None if code is None else ExcCodes(code)
+
+    def moving(self) -> tuple[Mover, ...]:
+        """The values that move now: a stopped machine's output stays at 0."""
+        if is_running(self.behaviour, self.image):
+            return self.movers
+        still = {point.key for point in self.behaviour.motion}
+        return tuple(mover for mover in self.movers if mover.point.key not in still)
 
     def _refusal(self, function_code: int) -> int | None:
         """The exception any request gets from this unit now: its quirk, or 01."""
@@ -240,6 +263,23 @@ class Simulator:
         """Store ``value`` as the device would report it (ValueRejectedError if it cannot)."""
         device = self._device(unit)
         device.image |= words_for(device.point(key), value, device.image)
+
+    def raise_fault(self, unit: int, key: str, label: str | None = None) -> None:
+        """Trip the unit: the alarm ``key`` on (a fault code's ``label``), and unless it is a
+        warning the device stops (bridge/core/simulation_behaviour.py); ValueRejectedError
+        for a key that is no alarm of the unit."""
+        device = self._device(unit)
+        device.image |= raise_fault(device.behaviour, key, label, device.image)
+
+    def clear_faults(self, unit: int) -> None:
+        """Every alarm of the unit back to normal, as a fault reset does."""
+        device = self._device(unit)
+        device.image |= clear_faults(device.behaviour, device.image)
+
+    def faults(self, unit: int) -> list[str]:
+        """The unit's active alarms (keys)."""
+        device = self._device(unit)
+        return active_faults(device.behaviour, device.image)
 
     def _record_write(self, unit: int, write: Write, received: float) -> None:
         self.writes.append((unit, write))
@@ -337,6 +377,6 @@ class Simulator:
             while True:
                 await asyncio.sleep(self._tick)
                 for device in self._devices.values():
-                    device.image |= advance(device.movers, device.image, self._rng)
+                    device.image |= advance(device.moving(), device.image, self._rng)
         finally:
             self._moving = False

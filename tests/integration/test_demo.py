@@ -94,6 +94,40 @@ async def discovery_of_every_device(url: str, version: str = "5", **login: str) 
             await asyncio.sleep(0.2)
 
 
+async def trip_and_reset_the_pump(url: str) -> None:
+    """The README's fault command: the pump's alarm and status show it on MQTT; switching
+    the pump off and on (it has no reset register) clears it and runs it again."""
+    config = MqttConfig(url=url)
+    async with MqttClient(config, will_topic="tester/state", client_id="tester") as client:
+        await client.subscribe("modbus/bridge/response/demo/fault", "modbus/borehole_pump")
+        body = {"device": "borehole_pump", "fault": "alarm_dry_running", "transaction": 3}
+        await client.publish("modbus/bridge/request/demo/fault", json.dumps(body))
+        seen: dict[str, object] = {}
+        async with asyncio.timeout(15):
+            async for message in client.messages():
+                document = json.loads(message.payload)
+                if message.topic.endswith("/demo/fault"):
+                    assert document["transaction"] == 3
+                    assert document["data"] == {
+                        "device": "borehole_pump",
+                        "faults": ["alarm_dry_running"],
+                    }
+                    seen["answer"] = document
+                elif "alarm_dry_running" in document["alarms"]:
+                    assert document["status"] == "alarm"
+                    assert document["alarm_dry_running"] is True
+                    seen["state"] = document
+                if len(seen) == 2:
+                    break
+            for command in ("OFF", "ON"):
+                await client.publish("modbus/borehole_pump/start_stop/set", command)
+            async for message in client.messages():
+                document = json.loads(message.payload)
+                if message.topic == "modbus/borehole_pump" and document["status"] == "running":
+                    assert document["alarms"] == []
+                    break
+
+
 @pytest.mark.asyncio
 async def test_demo_on_a_given_broker_publishes_five_devices_and_stops(
     mosquitto: Broker,
@@ -110,6 +144,7 @@ async def test_demo_on_a_given_broker_publishes_five_devices_and_stops(
                 break
             await asyncio.sleep(0.2)
         assert "status" in json.loads(state["modbus/borehole_pump"])
+        await trip_and_reset_the_pump(mosquitto.url)
         out = await stop(process)
         assert out.rstrip().endswith("demo stopped; its devices were removed from the broker")
     # Home Assistant forgets the six devices: no discovery config, no retained state
