@@ -3,6 +3,7 @@ commands are printed, not run)."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -15,13 +16,15 @@ pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="make is no
 
 
 def planned(target: str, venv: Path) -> list[str]:
+    outer = ("MAKEFLAGS", "MAKELEVEL", "MFLAGS", "MAKEOVERRIDES")  # when make test runs us
     result = subprocess.run(
-        ["make", "-n", target, f"VENV={venv}"],
+        ["make", "--no-print-directory", "-n", target, f"VENV={venv}"],
         capture_output=True,
         text=True,
         timeout=30,
         check=True,
         cwd=ROOT,
+        env={k: v for k, v in os.environ.items() if k not in outer},
     )
     return result.stdout.splitlines()
 

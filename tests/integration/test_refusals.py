@@ -50,10 +50,11 @@ def holds_true_values(poller: DevicePoller, sim: Simulator) -> bool:
 
 
 def availability(recorder: Recorder, name: str) -> list[bool | None]:
-    """The device's online state as reported, changes only."""
+    """The device's online state as reported, changes only (not the "not known yet" of the
+    updates before its first answer, e.g. the end of a first poll nobody answered)."""
     states: list[bool | None] = []
     for update in recorder.of(name):
-        if not states or states[-1] != update.online:
+        if update.online is not None and (not states or states[-1] != update.online):
             states.append(update.online)
     return states
 
