@@ -88,8 +88,9 @@ WORKDIR /config
 # uid alone keeps the supplementary dialout group of the passwd entry.
 USER 10001
 
-# Prometheus metrics (config bridge.metrics: {enabled: true, host: 0.0.0.0, port: 9464}).
-EXPOSE 9464
+# Prometheus metrics (config bridge.metrics: {enabled: true, host: 0.0.0.0, port: 9464}),
+# and the web page (bridge.web: {enabled: true, host: 0.0.0.0, token_env: ...}).
+EXPOSE 9464 8099
 
 # Health = the running bridge answers on its metrics endpoint, and no bus is down.
 # /health is served on the bridge's own event loop (bridge/metrics.py), so a crashed

@@ -213,6 +213,10 @@ def test_docs_examples_make_valid_bridge_configs(
     assert "s3cret" not in json.dumps(data)
     metrics = loaded.config.bridge.metrics
     assert (metrics.enabled, metrics.host, metrics.port) == (True, "127.0.0.1", 9464)
+    web = loaded.config.bridge.web  # in the sidebar through ingress: the proxy alone gets in
+    assert (web.enabled, web.port, web.token) == (True, addon_config()["ingress_port"], None)
+    assert [str(address) for address in web.ingress_proxies] == ["172.30.32.2"]
+    assert addon_config()["ingress"] is True
 
 
 def test_a_config_file_keeps_its_settings_but_not_its_broker(
@@ -395,7 +399,13 @@ async def test_the_addon_starts_the_bridge_on_the_supervisors_broker(
                         seen[message.topic] = message.payload
 
                 task = asyncio.create_task(collect())
-                await eventually(lambda: seen.get("modbus/pump/availability") == b"online", 40)
+                await eventually(
+                    lambda: (
+                        seen.get("modbus/pump/availability") == b"online"
+                        and "homeassistant/device/pump/config" in seen
+                    ),  # after the first values
+                    40,
+                )
                 task.cancel()
             finally:
                 process.send_signal(signal.SIGTERM)

@@ -33,6 +33,7 @@ from bridge.config import (
     MetricsConfig,
     SerialBus,
     TcpBus,
+    WebConfig,
     load_config,
     load_config_data,
 )
@@ -429,7 +430,8 @@ def test_dockerfile_healthcheck_asks_the_bridge_whether_a_bus_is_down() -> None:
     env = _one(runtime, "ENV")
     url = urlsplit(re.search(r"BRIDGE_HEALTH_URL=(\S+)", env).group(1))
     assert (url.hostname, url.port, url.path) == ("127.0.0.1", MetricsConfig().port, HEALTH_PATH)
-    assert f"EXPOSE {MetricsConfig().port}" in {f"{n} {a}" for n, a in runtime}
+    exposed = {port for n, a in runtime if n == "EXPOSE" for port in a.split()}
+    assert {str(MetricsConfig().port), str(WebConfig().port)} <= exposed
 
 
 def healthcheck_code() -> str:

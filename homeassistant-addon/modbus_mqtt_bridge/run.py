@@ -37,6 +37,9 @@ from bridge.errors import InputError
 
 OPTIONS = Path(os.environ.get("ADDON_OPTIONS", "/data/options.json"))
 CONFIG_DIR = Path(os.environ.get("ADDON_CONFIG_DIR", "/config"))
+# The web page behind Home Assistant's ingress: the Supervisor's proxy is the only client
+# let in (it logged the user in); anybody else who reaches the port gets 403.
+INGRESS_WEB = {"enabled": True, "host": "0.0.0.0", "port": 8099, "ingress_proxies": ["172.30.32.2"]}  # noqa: S104
 GENERATED = Path(os.environ.get("ADDON_GENERATED", "/tmp/modbus-mqtt-bridge.yaml"))  # noqa: S108
 SUPERVISOR = os.environ.get("SUPERVISOR_API", "http://supervisor")
 PASSWORD_ENV = "BRIDGE_MQTT_PASSWORD"  # noqa: S105 - the name of a variable, not a secret
@@ -154,6 +157,7 @@ def bridge_config(options: dict[str, Any], service: dict[str, Any]) -> tuple[dic
     health = {"enabled": True, "port": HEALTH_URL.port or 80}
     management["metrics"] = {"host": "127.0.0.1"} | metrics | health
     management["mapping_dirs"] = [str(base / d) for d in management.get("mapping_dirs", [])]
+    management["web"] = dict(management.get("web") or {}) | INGRESS_WEB
     data["bridge"] = management
     for device in data.get("devices") or []:
         mapping = device.get("mapping")
