@@ -14,6 +14,7 @@ import pytest
 
 from bridge.core.codec import encode
 from bridge.core.entity import Table
+from bridge.core.guard import Guard
 from bridge.core.mapping import Point
 from bridge.core.request import Read, Write
 from bridge.modbus.frame import FrameError, build_frame, parse_frame
@@ -169,7 +170,11 @@ def test_breaker_toggles_are_guarded() -> None:
     gen, mains = POINTS["command_generator_breaker"], POINTS["command_mains_breaker"]
     assert not gen.entity.idempotent
     assert not mains.entity.idempotent
+    assert gen.entity.dangerous
     assert mains.entity.dangerous
+    guard = Guard.of(POINTS.values())
+    for coil in (5, 6):  # seed Tbl 10: 0005 generator, 0006 mains close/open (HGM6120)
+        assert guard.dangerous_in(Table.COIL, coil, (0x00FF,)) == [coil]
     assert "command_mains_breaker" not in HGM6110_POINTS
     assert "command_hgm6110_5" not in POINTS
 

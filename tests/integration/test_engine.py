@@ -197,7 +197,10 @@ async def test_a_toggle_is_never_resent_after_a_timeout() -> None:
     sim = simulator((1, "smartgen_hgm6100"), latency=0.4)  # answers after the bridge gave up
     async with serving_tcp(sim) as port:
         engine = Engine(
-            config([tcp_bus(port, timeout=0.2, retries=2)], [device("smartgen_hgm6100")])
+            config(
+                [tcp_bus(port, timeout=0.2, retries=2)],
+                [device("smartgen_hgm6100", allow_dangerous_writes=True)],  # a breaker
+            )
         )
         async with running(engine, pollers=False):
             with pytest.raises(DeviceTimeoutError):
