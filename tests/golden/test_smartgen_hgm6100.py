@@ -289,3 +289,26 @@ def test_every_option_combination_resolves_and_presses(options: dict[str, str]) 
         assert write.values == (0x00FF,)
     assert ("mains_voltage_ua" in points) is (options["model"] == "hgm6120")
     assert ("ecu_fuel_total" in points) is (options["can"] == "yes")
+
+
+# --- phase angles 0092–0097: every model measures them, not only CAN variants ---------------
+
+PHASE_ANGLES = [f"generator_phase_angle_u{p}" for p in "abc"]
+MAINS_ANGLES = [f"mains_phase_angle_u{p}" for p in "abc"]
+
+
+@pytest.mark.parametrize("can", ["no", "yes"])
+def test_phase_angles_are_not_can_values(can: str) -> None:
+    """Seed rows 0092–0097 ("UA … 0~360 … °") carry the generator/mains prefixes, not the
+    CAN-only remark of 0082–0091: present whatever the can option, mains ones on HGM6120."""
+    points = MAPPING.points({"can": can})
+    read = read_of(points, *PHASE_ANGLES, *MAINS_ANGLES)
+    assert request_frame(read) == hexbytes("01 03 00 5C 00 06 05 DA")
+    image = _holding(r92=0, r93=120, r94=240, r95=359, r96=32766, r97=1)
+    assert [decoded(points, k, image) for k in PHASE_ANGLES + MAINS_ANGLES] == [
+        0, 120, 240, 359, None, 1,
+    ]  # fmt: skip
+    hgm6110 = MAPPING.points({"can": can, "model": "hgm6110"})
+    assert all(k in hgm6110 for k in PHASE_ANGLES)
+    assert not any(k in hgm6110 for k in MAINS_ANGLES)
+    assert ("ecu_engine_speed" in points) is (can == "yes")  # 0082–0091 stay CAN-only

@@ -598,7 +598,7 @@ def test_smartgen_reads_its_alarm_bits_in_one_fc01_read() -> None:
     assert spans(_plan("smartgen_hgm6100")) == [
         ("coil", 0, 79),
         ("holding", 0, 56),
-        ("holding", 70, 12),
+        ("holding", 70, 28),  # clock, model, date 70-81 and the phase angles 92-97
     ]
     can = _plan("smartgen_hgm6100", {"can": "yes"})
     assert spans(can)[0] == ("coil", 0, 82)
@@ -830,7 +830,7 @@ def test_learning_a_refused_hole_keeps_every_point() -> None:
         ("coil", 6, 73),
         ("holding", 0, 32),
         ("holding", 34, 22),
-        ("holding", 70, 12),
+        ("holding", 70, 28),
     ]
 
 
