@@ -218,7 +218,8 @@ def _number(key: str, entity: Entity, context: ComponentContext) -> Config:
 
 
 def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[float, float]:
-    """Limits read from the device, else the mapping's, else what the register holds."""
+    """Limits read from the device, else the mapping's, else what the register holds;
+    without ``allow_dangerous_writes``, none below ``dangerous_below``."""
     raw_low, raw_high = raw_bounds(entity)
     ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
     if entity.sign_from is not None:
@@ -231,7 +232,10 @@ def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[f
     low = dynamic[0] if dynamic[0] is not None else static[0]
     high = dynamic[1] if dynamic[1] is not None else static[1]
     if low > high:  # limit registers that contradict each other: keep the mapping's
-        return static
+        low, high = static
+    guarded = entity.dangerous_below
+    if guarded is not None and not context.allow_dangerous_writes and guarded <= high:
+        low = max(low, guarded)  # values below are refused: not offered
     return low, high
 
 

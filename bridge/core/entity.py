@@ -187,6 +187,11 @@ class Entity(BaseModel):
     idempotent: bool = Field(True, description="false: never retried after a timeout (toggles)")
     eeprom: bool = Field(False, description="non-volatile: skip unchanged writes, rate limit")
     dangerous: bool = Field(False, description="write only when the config allows it")
+    dangerous_below: float | None = Field(
+        None,
+        description="a value below this is a guarded write, like a dangerous one (a negative "
+        "speed reference runs the motor in reverse)",
+    )
     secret: bool = Field(False, description="never published (passwords)")
     alarm: bool = Field(False, description="an alarm: bool when on, enum when not normal")
     normal: tuple[int, ...] = Field((0,), description="raw enum values that are not an alarm")
@@ -397,6 +402,19 @@ def _check_write(e: Entity) -> str | None:
         return "on_when derives a read-only boolean"
     if e.access is Access.WRITE and e.alarm:
         return "a write-only entity cannot be an alarm"
+    return _check_dangerous_below(e)
+
+
+def _check_dangerous_below(e: Entity) -> str | None:
+    """``dangerous_below`` is judged on the raw word of one big-endian 16-bit register."""
+    if e.dangerous_below is None:
+        return None
+    if not e.writable or e.kind != "number":
+        return "dangerous_below guards writes of a number"
+    if e.data_type not in (DataType.U16, DataType.S16) or e.bit is not None:
+        return "dangerous_below applies to a whole u16 or s16 register"
+    if e.sign_from is not None or e.byte_order is not Order.BIG or e.scale <= 0:
+        return "dangerous_below needs the sign in the register itself and a positive scale"
     return None
 
 

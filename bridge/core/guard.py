@@ -11,6 +11,10 @@ A ``Guard`` holds two sets of (table, wire address) cells:
   some words are guarded: a dangerous button there guards the word it writes (the P2's
   2000H takes "reverse run" 2 only with ``allow_dangerous_writes``, "stop" 6 always). A
   register only dangerous entities write is guarded whole, whatever the word.
+- ``floors``: registers where a value below a floor is guarded (``dangerous_below``: a
+  negative speed reference of the P2's 1000H or the Vacon's 2003 runs the motor in
+  reverse, so it needs ``allow_dangerous_writes`` like the reverse-run command itself);
+  each cell holds its raw floors, with whether the word is read signed.
 - ``hidden``: secret or write-only entities (a password), read raw by
   ``bridge/request/device/read`` only when ``bridge.allow_raw_writes`` is on.
 
@@ -23,12 +27,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from decimal import ROUND_CEILING, Decimal
 
-from bridge.core.codec import COMMAND_PRESS, encode
-from bridge.core.entity import Table
+from bridge.core.codec import COMMAND_PRESS, encode, to_signed
+from bridge.core.entity import DataType, Entity, Table
 from bridge.core.mapping import Point
 
 Cell = tuple[Table, int]
+Floor = tuple[int, bool]  # the lowest raw value allowed, and whether the word is signed
 WHOLE = 0xFFFF
 
 
@@ -39,6 +45,7 @@ class Guard:
     dangerous: Mapping[Cell, int] = field(default_factory=dict)  # cell -> guarded bits
     hidden: frozenset[Cell] = frozenset()
     dangerous_words: Mapping[Cell, frozenset[int]] = field(default_factory=dict)
+    floors: Mapping[Cell, frozenset[Floor]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, points: Iterable[Point]) -> Guard:
@@ -53,9 +60,13 @@ class Guard:
         }
         dangerous: dict[Cell, int] = {}
         words: dict[Cell, frozenset[int]] = {}
+        floors: dict[Cell, frozenset[Floor]] = {}
         hidden: set[Cell] = set()
         for point in points:
             entity = point.entity
+            if entity.dangerous_below is not None:
+                cell = (point.table, point.write_address)
+                floors[cell] = floors.get(cell, frozenset()) | {_floor(entity)}
             written = _cells(point.table, point.write_address, point.count)
             if entity.dangerous and _is_command_word(point) and written <= shared:
                 for write in encode(point, COMMAND_PRESS, {}):
@@ -67,7 +78,7 @@ class Guard:
                         _add(dangerous, guarded)
             if entity.secret or not entity.readable:
                 hidden |= written | _cells(point.table, point.address, point.count)
-        return cls(dangerous, frozenset(hidden), words)
+        return cls(dangerous, frozenset(hidden), words, floors)
 
     def __or__(self, other: Guard) -> Guard:
         if not (other.dangerous or other.hidden or other.dangerous_words):
@@ -80,7 +91,10 @@ class Guard:
         words = dict(self.dangerous_words)
         for cell, values in other.dangerous_words.items():
             words[cell] = words.get(cell, frozenset()) | values
-        return Guard(dangerous, self.hidden | other.hidden, words)
+        floors = dict(self.floors)
+        for cell, limits in other.floors.items():
+            floors[cell] = floors.get(cell, frozenset()) | limits
+        return Guard(dangerous, self.hidden | other.hidden, words, floors)
 
     def dangerous_in(self, table: Table, address: int, values: tuple[int, ...]) -> list[int]:
         """Guarded addresses a raw write of ``values`` from ``address`` would touch: any
@@ -92,15 +106,18 @@ class Guard:
         self, table: Table, address: int, values: tuple[int, ...], before: Mapping[Cell, int]
     ) -> list[int]:
         """Guarded addresses whose guarded bits a write of ``values`` from ``address``
-        would change, given what the unit holds (``before``, freshly read). A coil, or a
-        register whose content is not known, counts as changed."""
+        would change, given what the unit holds (``before``, freshly read), or that it
+        would set below their floor. A coil, or a register whose content is not known,
+        counts as changed."""
         changed: list[int] = []
         for offset, word in enumerate(values):
             cell = (table, address + offset)
             bits = self.dangerous.get(cell)
             old = before.get(cell)
-            if word in self.dangerous_words.get(cell, ()) or (
-                bits is not None and (table.is_bits or old is None or (old ^ word) & bits)
+            if (
+                word in self.dangerous_words.get(cell, ())
+                or (bits is not None and (table.is_bits or old is None or (old ^ word) & bits))
+                or _below(word, self.floors.get(cell, ()))
             ):
                 changed.append(cell[1])
         return changed
@@ -111,6 +128,18 @@ class Guard:
 
 
 UNGUARDED = Guard()
+
+
+def _floor(entity: Entity) -> Floor:
+    """The lowest raw value of ``entity`` that is not below ``dangerous_below``: raw *
+    scale + offset >= limit (the entity's checks make the scale positive)."""
+    limit = Decimal(repr(entity.dangerous_below))
+    exact = (limit - Decimal(repr(entity.offset))) / Decimal(repr(entity.scale))
+    return int(exact.to_integral_value(ROUND_CEILING)), entity.data_type is DataType.S16
+
+
+def _below(word: int, floors: Iterable[Floor]) -> bool:
+    return any((to_signed(word, 16) if signed else word) < floor for floor, signed in floors)
 
 
 def _is_command_word(point: Point) -> bool:

@@ -226,12 +226,14 @@ class DeviceWriter:
         image = dict(before)
         for w in writes:
             if guard.dangerous_changed(w.table, w.address, w.values, image):
-                raise self._guarded(point.key)
+                limit = point.entity.dangerous_below
+                below = f": a value below {limit:g}" if limit is not None else ""
+                raise self._guarded(point.key + below)
             image |= _stored(w)
 
-    def _guarded(self, key: str) -> ValueRejectedError:
+    def _guarded(self, subject: str) -> ValueRejectedError:
         return ValueRejectedError(
-            f"{key} is a guarded write (dangerous); set allow_dangerous_writes: true "
+            f"{subject} is a guarded write (dangerous); set allow_dangerous_writes: true "
             f"for device {self.poller.device.id} to permit it"
         )
 

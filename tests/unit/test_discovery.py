@@ -307,6 +307,23 @@ def test_number_range(
     assert (config["min"], config["max"]) == bounds
 
 
+def test_number_range_offers_no_guarded_value_until_dangerous_writes_are_allowed() -> None:
+    """A negative speed reference (reverse) is guarded: Home Assistant does not offer it
+    until the device allows dangerous writes."""
+    entity = {"access": "rw", "type": "s16", "scale": 0.01, "min": -100, "max": 100}
+    guarded = entity | {"dangerous_below": 0}
+    assert _bounds(_one(entity)) == (-100.0, 100.0)
+    assert _bounds(_one(guarded)) == (0.0, 100.0)
+    assert _bounds(_one(guarded, allow_dangerous_writes=True)) == (-100.0, 100.0)
+    above = entity | {"dangerous_below": -200}  # guards nothing in the range
+    assert _bounds(_one(above)) == (-100.0, 100.0)
+
+
+def _bounds(config: dict[str, Any] | None) -> tuple[float, float]:
+    assert config is not None
+    return config["min"], config["max"]
+
+
 def test_number_range_with_a_sign_bit() -> None:
     entities = {
         "sign": {"name": "Sign", "address": 1, "bit": 0, "access": "rw"},

@@ -5,6 +5,7 @@ from __future__ import annotations
 from bridge.core.entity import Table
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Point, builtin_mapping_path, load_mapping
+from tests.factory import make_mapping
 
 FACTORY_RESET = 0x102F
 
@@ -108,3 +109,48 @@ def test_a_command_register_guards_only_the_words_of_its_dangerous_buttons() -> 
         assert guard.dangerous_in(Table.HOLDING, command, (word,)) == [command]
     merged = Guard() | guard
     assert merged.dangerous_words == guard.dangerous_words
+
+
+SET_VALUE = 0x1000  # P2: communication set value, s16 0.01 %, negative = reverse
+SPEED_REFERENCE = 2002  # Vacon ID 2003: FB speed reference, s16 0.01 %, negative = reverse
+
+
+def test_a_negative_speed_reference_is_guarded_like_reverse_run() -> None:
+    """P2 1000H and Vacon 2003: a word below 0 (two's complement) is a guarded write, whatever
+    the register held before; 0 and positive references are not."""
+    for name, address in (("p2_vfd", SET_VALUE), ("vacon_nx", SPEED_REFERENCE)):
+        guard = Guard.of(points_of(name))
+        cell = (Table.HOLDING, address)
+        assert cell not in guard.dangerous
+        assert guard.floors[cell] == frozenset({(0, True)})
+        for word in (0, 1, 5000, 10000, 0x7FFF):
+            assert guard.dangerous_changed(Table.HOLDING, address, (word,), {cell: 0}) == []
+            assert guard.dangerous_in(Table.HOLDING, address, (word,)) == []
+        for word in (0xFFFF, 0xEC78, 0xD8F0, 0x8000):  # -1, -5000, -10000, -32768
+            assert guard.dangerous_changed(Table.HOLDING, address, (word,), {cell: word}) == [
+                address
+            ]
+            assert guard.dangerous_in(Table.HOLDING, address - 1, (0, word)) == [address]
+        assert (Guard() | guard).floors == guard.floors  # survives a reload
+
+
+def test_a_floor_follows_scale_offset_and_signedness() -> None:
+    mapping = make_mapping(
+        {
+            "signed": {
+                "name": "Signed", "address": 0, "type": "s16", "access": "rw",
+                "scale": 0.1, "dangerous_below": -2.5,
+            },
+            "unsigned": {
+                "name": "Unsigned", "address": 1, "access": "rw", "offset": -40,
+                "dangerous_below": 0,
+            },
+        }
+    )  # fmt: skip
+    guard = Guard.of(mapping.points().values())
+    assert guard.floors[(Table.HOLDING, 0)] == frozenset({(-25, True)})
+    assert guard.floors[(Table.HOLDING, 1)] == frozenset({(40, False)})
+    assert guard.dangerous_in(Table.HOLDING, 0, (0xFFE7,)) == []  # -25 = -2.5
+    assert guard.dangerous_in(Table.HOLDING, 0, (0xFFE6,)) == [0]  # -26 = -2.6
+    assert guard.dangerous_in(Table.HOLDING, 1, (40,)) == []  # raw 40 - 40 = 0
+    assert guard.dangerous_in(Table.HOLDING, 1, (39,)) == [1]  # -1

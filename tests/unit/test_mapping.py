@@ -176,6 +176,12 @@ def test_fc16_only_device_writes_single_registers_with_16() -> None:
         ),
         ({"ha": {"icon": "pump"}}, "String should match pattern"),
         ({"colour": "red"}, "Extra inputs are not permitted"),
+        ({"dangerous_below": 0}, "dangerous_below guards writes of a number"),
+        ({"access": "rw", "type": "bool", "dangerous_below": 0}, "guards writes of a number"),
+        ({"access": "rw", "type": "s32", "dangerous_below": 0}, "a whole u16 or s16 register"),
+        ({"access": "rw", "bit": 0, "width": 4, "dangerous_below": 1}, "a whole u16 or s16"),
+        ({"access": "rw", "scale": -1, "dangerous_below": 0}, "a positive scale"),
+        ({"access": "rw", "byte_order": "little", "dangerous_below": 0}, "a positive scale"),
     ],
 )
 def test_field_errors_name_entity_and_field(fields: dict, message: str) -> None:
