@@ -286,6 +286,21 @@ def test_kick_time_option() -> None:
     assert write.values == (25,)
 
 
+@pytest.mark.parametrize(
+    ("option", "limits", "step", "top", "beyond"),
+    [("1 s", (0, 50), 1, 50, 51), ("0.1 s", (0, 5.0), 0.1, 5.0, 5.1)],
+)
+def test_kick_time_range_is_the_printed_0_50_in_register_units(
+    option: str, limits: tuple[float, float], step: float, top: float, beyond: float
+) -> None:
+    """Seed row 0x100C "0~50": 0-50 raw, i.e. 0-5.0 s when the register counts 0.1 s."""
+    point = MAPPING.points({"kick_time_scale": option})["kick_start_time"]
+    assert (point.entity.min, point.entity.max, point.entity.step) == (*limits, step)
+    assert encode(point, top, {})[0].values == (50,)
+    with pytest.raises(ValueRejectedError, match="outside"):
+        encode(point, beyond, {})
+
+
 def test_current_limit_option() -> None:
     percent = MAPPING.points({"current_limit_unit": "%"})["starting_current_limit"].entity
     assert percent.unit == "%" and percent.ha.device_class is None

@@ -17,6 +17,7 @@ from bridge.core.address import to_wire
 from bridge.core.codec import Image, encode
 from bridge.core.entity import Table
 from bridge.core.request import Read, Write
+from bridge.errors import ValueRejectedError
 from bridge.modbus.frame import FrameError, build_frame, exception_code, parse_frame
 from tests.golden.frames import decoded, hexbytes, image_from, read_of, request_frame, shipped
 
@@ -241,6 +242,32 @@ def test_application_variants_of_process_data_in(
     assert point.entity.name == name
     (write,) = encode(point, value, {})
     assert write.values == (raw,)
+
+
+@pytest.mark.parametrize(
+    ("application", "key", "limits"),
+    [
+        ("all_in_one_basic", "pd_in_1", (-32768, 32767)),
+        ("multipurpose", "pd_in_1", (-3276.8, 3276.7)),
+        ("multipurpose", "pd_in_2", (-327.68, 327.67)),
+        ("pid_pump_fan", "pd_in_1", (-327.68, 327.67)),
+        ("pid_pump_fan", "pd_in_2", (-327.68, 327.67)),
+        ("pid_pump_fan", "pd_in_3", (-327.68, 327.67)),
+    ],
+)
+def test_process_data_in_limits_follow_the_application_scale(
+    application: str, key: str, limits: tuple[float, float]
+) -> None:
+    """An Integer 16 word at 0.1 % holds -3276.8..3276.7 %, at 0.01 % -327.68..327.67 %: the
+    ends are written as the register's ends, one step beyond is refused before the wire."""
+    point = MAPPING.points({"application": application})[key]
+    assert (point.entity.min, point.entity.max) == limits
+    assert encode(point, limits[0], {})[0].values == (0x8000,)
+    assert encode(point, limits[1], {})[0].values == (0x7FFF,)
+    step = point.entity.step or 1
+    for beyond in (limits[0] - step, limits[1] + step):
+        with pytest.raises(ValueRejectedError, match="outside"):
+            encode(point, beyond, {})
 
 
 def test_monitor_current_resolution_option() -> None:

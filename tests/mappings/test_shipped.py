@@ -9,8 +9,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bridge.core.codec import Image, decode, encode
-from bridge.core.entity import Access, Component, Confidence
+from bridge.core.codec import Image, decode, encode, raw_bounds, scale_value
+from bridge.core.entity import Access, Component, Confidence, DataType
 from bridge.core.mapping import (
     Mapping,
     Point,
@@ -134,3 +134,19 @@ def test_any_register_content_decodes(name: str, data: st.DataObject) -> None:
         except MissingDataError:
             pytest.fail(f"{key} needs a register the mapping does not read")
         assert value is None or isinstance(value, bool | int | float | str), key
+
+
+@pytest.mark.parametrize("name", sorted(MAPPINGS))
+def test_number_limits_fit_the_register_in_every_variant(name: str) -> None:
+    """A writable number's min/max (after its variant's scale) lie inside what its register
+    can hold: Home Assistant is never offered a value the codec would refuse as too large."""
+    mapping = MAPPINGS[name]
+    for options in combinations(mapping):
+        for key, point in mapping.points(options).items():
+            e = point.entity
+            if not e.writable or e.kind != "number" or e.data_type is DataType.F32:
+                continue
+            ends = sorted(scale_value(e, raw) for raw in raw_bounds(e))
+            low, high = (-ends[1], ends[1]) if point.sign is not None else (ends[0], ends[1])
+            for limit in (e.min, e.max):
+                assert limit is None or low <= limit <= high, (options, key, limit, (low, high))
