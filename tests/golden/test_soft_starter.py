@@ -238,17 +238,27 @@ def test_fault_codes() -> None:
 # --- derived views ------------------------------------------------------------------------
 
 PROTECTIONS = [
-    # id, protection view, raw threshold, enabled
-    ("overvoltage-99", "overvoltage_protection", 99, False),
-    ("overvoltage-100", "overvoltage_protection", 100, True),
+    # id, protection view, raw threshold, enabled. The seed's 以下 ("below") and 以上 ("above")
+    # include the number itself: the printed boundary value switches the protection off.
+    ("overvoltage-0", "overvoltage_protection", 0, False),
+    ("overvoltage-100", "overvoltage_protection", 100, False),  # "100 以下为关闭"
+    ("overvoltage-101", "overvoltage_protection", 101, True),
+    ("overvoltage-150", "overvoltage_protection", 150, True),
+    ("undervoltage-0", "undervoltage_protection", 0, True),
     ("undervoltage-99", "undervoltage_protection", 99, True),
-    ("undervoltage-100", "undervoltage_protection", 100, False),
-    ("overload-109", "overload_protection", 109, False),
-    ("overload-110", "overload_protection", 110, True),
-    ("undercurrent-90", "undercurrent_protection", 90, True),
-    ("undercurrent-91", "undercurrent_protection", 91, False),
-    ("imbalance-9", "current_imbalance_protection", 9, False),
-    ("imbalance-10", "current_imbalance_protection", 10, True),
+    ("undervoltage-100", "undervoltage_protection", 100, False),  # "100 以上为关闭"
+    ("overload-100", "overload_protection", 100, False),
+    ("overload-110", "overload_protection", 110, False),  # "110 以下为关闭"
+    ("overload-111", "overload_protection", 111, True),
+    ("overload-200", "overload_protection", 200, True),
+    ("undercurrent-30", "undercurrent_protection", 30, True),
+    ("undercurrent-89", "undercurrent_protection", 89, True),
+    ("undercurrent-90", "undercurrent_protection", 90, False),  # "90 以上为关闭"
+    ("undercurrent-100", "undercurrent_protection", 100, False),
+    ("imbalance-0", "current_imbalance_protection", 0, False),
+    ("imbalance-10", "current_imbalance_protection", 10, False),  # "10 以下为关闭"
+    ("imbalance-11", "current_imbalance_protection", 11, True),
+    ("imbalance-60", "current_imbalance_protection", 60, True),
 ]
 
 
