@@ -13,6 +13,8 @@ import pytest
 
 from bridge.core.codec import decode, encode, limits_of, unit_of
 from bridge.core.entity import Table
+from bridge.core.guard import Guard
+from bridge.core.mapping import Point
 from bridge.core.request import Read, Write
 from bridge.errors import ValueRejectedError
 from bridge.modbus.frame import FrameError, build_frame, parse_frame
@@ -264,3 +266,47 @@ def test_guarded_writes() -> None:
     passwords = [k for k in entities if k.startswith("password_")]
     assert len(passwords) == 6
     assert all(entities[k].secret and entities[k].dangerous for k in passwords)
+
+
+PROTECTION_SETTINGS = [
+    # what scales the pressure feedback
+    "sensor_full_scale",
+    "min_value_sensor",
+    "sign_min_value_sensor",
+    "offset_input_1",
+    "offset_input_2",
+    "offset_input_3",
+    "offset_input_4",
+    # the min/max pressure alarms, the dry-run protection, restarts, input polarity
+    "min_alarm_value",
+    "sign_min_alarm_value",
+    "max_alarm_value",
+    "dry_run_power_factor",
+    "autorestart",
+    "digital_input_1_contact",
+    "digital_input_2_contact",
+    "digital_input_3_contact",
+    "digital_input_4_contact",
+]
+
+
+@pytest.mark.parametrize("key", PROTECTION_SETTINGS)
+def test_feedback_scaling_and_protection_settings_are_guarded(key: str) -> None:
+    """Like the soft starter's protection thresholds: each can mis-scale the pressure
+    feedback or switch the dry-run / over-pressure protection off."""
+    assert MAPPING.entities[key].dangerous
+    guard = Guard.of(POINTS.values())
+    point = POINTS[key]
+    held = {(p.table, a): 0 for p in POINTS.values() for a in p.span}
+    written = encode(point, _other_value(point), held)
+    assert written
+    assert any(guard.dangerous_changed(w.table, w.address, w.values, held) for w in written)
+
+
+def _other_value(point: Point) -> object:
+    entity = point.entity
+    if entity.enum is not None:
+        return list(entity.enum.values())[1]
+    if entity.kind == "bool":
+        return True
+    return entity.max

@@ -219,7 +219,7 @@ async def test_raw_write_when_allowed_reaches_the_device(mosquitto: Broker, tmp_
         assert (3, several["data"]["function"]) in [(u, w.function) for u, w in sim.writes]
         assert [sim.image(3)[(Table.HOLDING, a)] for a in (0x102A, 0x102B)] == [0, 0]
         not_supported = await request(
-            tester, "device/write", {"unit": 1, "address": 0x34, "values": [45, 2]}
+            tester, "device/write", {"unit": 1, "address": 0x3A, "values": [45, 2]}
         )  # the Nastec has no FC16: its own answer comes back, named
         assert not_supported["error"] == "unit 1 refused: exception 1 (illegal function)"
         refused = await request(
