@@ -54,6 +54,7 @@ Outgoing = tuple[str, str, bool]  # topic, payload, retain
 OUTBOX = 200  # non-retained messages kept while the broker is away
 HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
+STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
 
 
 class Bridge:
@@ -179,8 +180,12 @@ class Bridge:
             await self._publish_everything(client)
 
     async def _health_reports(self, client: MqttClient) -> None:
-        """``<base>/bridge/health`` now and every ``health_interval`` (never when 0)."""
+        """``<base>/bridge/health`` now and every ``health_interval``, retained: Home
+        Assistant's health sensors read it as soon as they subscribe, not one interval
+        later (when 0: never, and a report an earlier run left is cleared)."""
         interval = self.loaded.config.bridge.health_interval
+        if interval <= 0:
+            await client.publish(self.topics.bridge_health, "", retain=True)
         while interval > 0:
             report = self._health.report(self.engine.snapshot())
             counters = self.dispatcher.counters
@@ -190,7 +195,7 @@ class Bridge:
                 "coalesced": counters.coalesced,
                 "dropped": self.dropped,
             }
-            await client.publish(self.topics.bridge_health, compact(report), retain=False)
+            await client.publish(self.topics.bridge_health, compact(report), retain=True)
             await asyncio.sleep(interval)
 
     # --- state ------------------------------------------------------------------------
@@ -212,12 +217,11 @@ class Bridge:
         devices_changed = False
         for device_id, keys in dirty.items():
             poller = self.engine.devices[device_id]
+            due = self.discovery.due(poller, keys)  # first: the payload admits the values
+            if due and await self.discovery.publish(client, only=device_id):
+                self._spawn(self._state_again(device_id))
             devices_changed |= self._device_messages(poller, keys, burst)
         await client.publish_many(burst)
-        for device_id, keys in dirty.items():
-            poller = self.engine.devices[device_id]
-            if self.discovery.due(poller, keys):
-                await self.discovery.publish(client, only=device_id)
         if devices_changed:
             await self._publish_devices_list(client)
         while self._outbox:
@@ -299,6 +303,14 @@ class Bridge:
         if self._group is None:
             raise RuntimeError("the bridge is not running")
         self._group.create_task(_guarded(work, failed))
+
+    async def _state_again(self, device_id: str) -> None:
+        """Publish a device's state once more after Home Assistant took its new discovery:
+        it applies a changed payload in the background, and a state that arrived first (a
+        code now in the options, a number now in range) would have been dropped."""
+        await asyncio.sleep(STATE_AFTER_DISCOVERY)
+        self._dirty.setdefault(device_id, set())
+        self._wake.set()
 
     def _read_done(self, device_id: str) -> None:
         """A read on request finished: publish the device's state (changed or not)."""

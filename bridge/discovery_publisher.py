@@ -14,7 +14,10 @@ Those are found two ways: the retained configs under the discovery prefix that c
 bridge's identifiers, and the list of topics the last full publish recorded, retained on
 ``<base>/bridge/discovery``, which is read by its exact name: RabbitMQ sends no retained
 message to a subscription with a wildcard, so the first way finds nothing there.
-``due(poller, changed)`` says whether a poll's changes call for ``publish(only=...)``.
+``due(poller, changed)`` says whether a poll's changes call for ``publish(only=...)``: the
+device just became ready, a unit or a limit read from a register changed, or a value Home
+Assistant would drop (an enum code the mapping does not know, a number outside its range)
+is not admitted by the payload sent (the payload admits what the device reads).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import json
 import logging
 
 from bridge.config import LoadedConfig
-from bridge.core.codec import limits_of, unit_of
+from bridge.core.codec import Value, limits_of, unit_of
 from bridge.core.discovery import (
     DeviceInfo,
     Origin,
@@ -33,6 +36,7 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
+from bridge.core.discovery_entity import shown_readings
 from bridge.core.entity import PollClass
 from bridge.core.topics import Topics
 from bridge.errors import MissingDataError
@@ -55,10 +59,23 @@ class DiscoveryPublisher:
         self._mqtt = loaded.config.mqtt
         self._health_interval = loaded.config.bridge.health_interval
         self._sent: dict[str, int] = {}  # device -> digest of its configs as sent
+        self._readings: dict[str, dict[str, Value]] = {}  # the readings each payload admits
 
     def forget(self, device_id: str) -> None:
         """Build the device's discovery afresh next time (its mapping changed)."""
         self._sent.pop(device_id, None)
+        self._readings.pop(device_id, None)
+
+    def stale(self, poller: DevicePoller, keys: set[str]) -> bool:
+        """True when the device's payload changes with these keys: a unit or limit source,
+        or a reading Home Assistant would drop that the payload sent does not admit."""
+        if keys & self.sources(poller):
+            return True
+        return self._shown(poller) != self._readings.get(poller.device.id, {})
+
+    @staticmethod
+    def _shown(poller: DevicePoller) -> dict[str, Value]:
+        return shown_readings(poller.points, poller.values, poller.image, poller.mapping.status)
 
     def ready(self, poller: DevicePoller) -> bool:
         """True when the device's discovery has what it depends on (or depends on nothing)."""
@@ -66,10 +83,10 @@ class DiscoveryPublisher:
 
     def due(self, poller: DevicePoller, changed: set[str]) -> bool:
         """True when a poll's changes may change what this device's discovery says: it just
-        became ready, or a unit or limit register changed."""
+        became ready, or its payload is stale (see ``stale``)."""
         if poller.device.id not in self._sent:
             return self.ready(poller)
-        return bool(changed & self.sources(poller))
+        return self.stale(poller, changed)
 
     @property
     def pending(self) -> list[str]:
@@ -110,6 +127,8 @@ class DiscoveryPublisher:
             if point.min_source is not None or point.max_source is not None:
                 with contextlib.suppress(MissingDataError):
                     limits[key] = limits_of(point, poller.image)
+        readings = self._shown(poller)
+        self._readings[poller.device.id] = readings
         return build_discovery(
             self._device_info(poller),
             self.topics,
@@ -117,17 +136,19 @@ class DiscoveryPublisher:
             mode=self._mqtt.discovery if self._mqtt.discovery != "off" else "device",
             units=units,
             limits=limits,
+            readings=readings,
             state_refresh=self._mqtt.state_refresh,
         )
 
     async def publish(
         self, client: MqttClient, *, clear_stale: bool = False, only: str | None = None
-    ) -> None:
+    ) -> bool:
         """Publish the bridge's and every device's configs (``only``: that device's, and
-        only if they changed). Device by device, remembering a digest of what went out,
-        not the payloads (about 26 kB per device)."""
+        only if they changed); True if a device's configs went out. Device by device,
+        remembering a digest of what went out, not the payloads (about 26 kB per device)."""
         if self._mqtt.discovery == "off":
-            return
+            return False
+        sent = False
         current: set[str] = set()
         if only is None:
             health = self._health_interval > 0  # the sensors read it
@@ -148,13 +169,15 @@ class DiscoveryPublisher:
                 continue  # published after its first poll (Bridge._flush)
             digest = hash(tuple(messages))
             if only is not None and digest == self._sent.get(device_id):
-                return  # nothing changed
+                return False  # nothing changed
             self._sent[device_id] = digest
             await self._send(client, messages, current)
+            sent = True
         if clear_stale:
             await self._clear_stale(client, current)
             record = json.dumps(sorted(current)).encode()
             await client.publish(self.topics.bridge_discovery, record, retain=True)
+        return sent
 
     @staticmethod
     async def _send(client: MqttClient, messages: list[Publish], sent: set[str]) -> None:

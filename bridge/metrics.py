@@ -28,6 +28,7 @@ the bridge started:
     modbus_device_errors_total{device}
     modbus_device_timeouts_total{device}
     modbus_device_busy_answers_total{device}            busy answers
+    modbus_device_unknown_codes_total{device}           enum codes without a label (code_<n>)
     modbus_device_exceptions_total{device,code}
     modbus_device_latency_seconds{device,quantile}      gauge, quantile 0.5 and 0.95;
                                                         absent before the first answer
@@ -75,6 +76,11 @@ _DEVICE_COUNTERS: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...]
     ("errors", "Failed requests: timeouts, bus down, failure exceptions", attrgetter("errors")),
     ("timeouts", "Requests not answered (or the bus was down)", attrgetter("timeouts")),
     ("busy_answers", "Busy answers (the device is alive, retried later)", attrgetter("busy")),
+    (
+        "unknown_codes",
+        "Enum codes read that the mapping has no label for (published as code_<n>)",
+        attrgetter("unknown_codes"),
+    ),
 )
 _DEVICE_GAUGES: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...] = (
     (

@@ -2,9 +2,10 @@
 
 The codec reads from a register *image*: a mapping ``(table, wire address) -> word`` (or
 0/1 for bit tables) holding what was last read from a device. ``decode(point, image)``
-returns the engineering value of one point (``None`` for a sentinel or an enum value the
-mapping does not know); ``encode(point, value, image)`` returns the writes that put
-``value`` on the device, or raises ``ValueRejectedError`` and nothing is written.
+returns the engineering value of one point (``None`` for a sentinel; an enum code the
+mapping has no label for is ``code_<n>``, never lost); ``encode(point, value, image)``
+returns the writes that put ``value`` on the device, or raises ``ValueRejectedError`` and
+nothing is written (an enum is written by its labels only).
 """
 
 from __future__ import annotations
@@ -30,6 +31,22 @@ COMMAND_OFF = "OFF"
 COMMAND_PRESS = "PRESS"
 _TRUE = {"on", "true", "1"}
 _FALSE = {"off", "false", "0"}
+UNKNOWN_CODE = "code_"  # prefix of an enum code the mapping has no label for: code_23
+
+
+def unknown_code(raw: int) -> str:
+    """How an enum code the mapping does not know is published: ``code_23``."""
+    return f"{UNKNOWN_CODE}{raw}"
+
+
+def is_unknown_code(entity: Entity, value: object) -> bool:
+    """True when ``value`` is an enum code ``entity`` has no label for (``code_23``)."""
+    return (
+        entity.enum is not None
+        and isinstance(value, str)
+        and value.startswith(UNKNOWN_CODE)
+        and value not in entity.enum.values()
+    )
 
 
 # --- raw words <-> integers -----------------------------------------------------------
@@ -164,7 +181,7 @@ def _finish(entity: Entity, raw: int) -> Value:
         low, high = entity.on_when.min, entity.on_when.max
         return (low is None or raw >= low) and (high is None or raw <= high)
     if entity.enum is not None:
-        return entity.enum.get(raw)
+        return entity.enum.get(raw, unknown_code(raw))
     if entity.kind == "bool":
         return bool(raw)
     return scale_value(entity, raw)
@@ -197,7 +214,8 @@ def unit_of(point: Point, image: Image) -> str | None:
         label = decode(point.unit_source, image)
     except MissingDataError:
         return None
-    return label if isinstance(label, str) else None
+    unknown = is_unknown_code(point.unit_source.entity, label)
+    return label if isinstance(label, str) and not unknown else None
 
 
 def limits_of(point: Point, image: Image) -> tuple[float | None, float | None]:

@@ -23,8 +23,11 @@ utilisation (%), timeouts and frame errors; per device its state, p95 latency (m
 errors and requests.
 
 ``units`` are units read from registers (``unit_from``) and ``limits`` the current
-limits read from registers (``min_from``/``max_from``, see ``codec.limits_of``): the
-app rebuilds and republishes discovery when either changes.
+limits read from registers (``min_from``/``max_from``, see ``codec.limits_of``);
+``readings`` the values read that the payload must admit (``discovery_entity.
+shown_readings``: an enum code the mapping has no label for, a number outside its range):
+the app rebuilds and republishes discovery when any of them changes, so that Home
+Assistant never drops a value the device holds.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from types import MappingProxyType
 from typing import Any, Literal
 
 from bridge import __version__
+from bridge.core.codec import Value
 from bridge.core.discovery_entity import (
     QOS,
     ComponentContext,
@@ -54,6 +58,7 @@ ALARMS_KEY = "alarms"
 BRIDGE_NAME = "Modbus MQTT bridge"
 _NO_UNITS: AnyMapping[str, str | None] = MappingProxyType({})
 _NO_LIMITS: AnyMapping[str, Limits] = MappingProxyType({})
+_NO_READINGS: AnyMapping[str, Value] = MappingProxyType({})
 _ROOT_ONLY = ("cmps",)
 
 Mode = Literal["device", "entity"]
@@ -107,6 +112,7 @@ def build_device_discovery(
     *,
     units: AnyMapping[str, str | None] = _NO_UNITS,
     limits: AnyMapping[str, Limits] = _NO_LIMITS,
+    readings: AnyMapping[str, Value] = _NO_READINGS,
     state_refresh: float = 300.0,
 ) -> dict[str, Any]:
     """The device-based discovery payload for ``<prefix>/device/<device>/config``."""
@@ -119,6 +125,7 @@ def build_device_discovery(
         state_refresh=state_refresh,
         units=units,
         limits=limits,
+        readings=readings,
     )
     return {
         "device": {
@@ -162,12 +169,19 @@ def build_discovery(
     mode: Mode,
     units: AnyMapping[str, str | None] = _NO_UNITS,
     limits: AnyMapping[str, Limits] = _NO_LIMITS,
+    readings: AnyMapping[str, Value] = _NO_READINGS,
     state_refresh: float = 300.0,
 ) -> list[Publish]:
     """The retained discovery messages of one device: one (device mode) or one per
     component (entity mode)."""
     payload = build_device_discovery(
-        device, topics, origin, units=units, limits=limits, state_refresh=state_refresh
+        device,
+        topics,
+        origin,
+        units=units,
+        limits=limits,
+        readings=readings,
+        state_refresh=state_refresh,
     )
     if mode == "device":
         return [Publish(topics.device_config(device.id), dump(payload))]
@@ -284,9 +298,9 @@ def health_components(
     topics: Topics, bridge_id: str, *, buses: Sequence[str], devices: Sequence[str]
 ) -> dict[str, Config]:
     """The bridge's diagnostic sensors on ``<base>/bridge/health``, by component key
-    (``bus_<bus>_<suffix>``, ``device_<device>_<suffix>``). The health document is not
-    retained: a sensor is unknown until the first report after Home Assistant starts,
-    and unavailable while the bridge is offline."""
+    (``bus_<bus>_<suffix>``, ``device_<device>_<suffix>``). The health document is
+    retained, so a sensor has a value as soon as Home Assistant subscribes; it is
+    unavailable while the bridge is offline."""
     identifier = bridge_identifier(topics)
     shared = {
         "qos": QOS,

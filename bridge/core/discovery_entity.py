@@ -18,13 +18,25 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from collections.abc import Mapping as AnyMapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-from bridge.core.codec import COMMAND_OFF, COMMAND_ON, COMMAND_PRESS, raw_bounds, scale_value
+from bridge.core.codec import (
+    COMMAND_OFF,
+    COMMAND_ON,
+    COMMAND_PRESS,
+    Image,
+    Value,
+    is_unknown_code,
+    limits_of,
+    raw_bounds,
+    scale_value,
+)
 from bridge.core.entity import Component, DataType, Entity, PollClass
 from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
+from bridge.core.mapping import Point
 from bridge.core.topics import Topics
+from bridge.errors import MissingDataError
 
 Config = dict[str, Any]
 Limits = tuple[float | None, float | None]
@@ -52,6 +64,7 @@ class ComponentContext:
     state_refresh: float
     units: AnyMapping[str, str | None]
     limits: AnyMapping[str, Limits]
+    readings: AnyMapping[str, Value] = field(default_factory=dict)
 
     @property
     def unique_prefix(self) -> str:
@@ -137,6 +150,46 @@ def alarms_config(context: ComponentContext) -> Config:
     }
 
 
+def shown_readings(
+    points: AnyMapping[str, Point],
+    values: AnyMapping[str, Value],
+    image: Image,
+    status: str | None = None,
+) -> dict[str, Value]:
+    """The values read that a discovery payload must admit, by key: an enum code the
+    mapping has no label for (an option), a writable number outside its limits or below
+    its ``dangerous_below`` (the number's range). ``status``: the mapping's status key,
+    whose value the ``status`` component shows too."""
+    shown: dict[str, Value] = {}
+    for key, point in points.items():
+        value = values.get(key)
+        if is_unknown_code(point.entity, value) or _beyond(point, value, image):
+            shown[key] = value
+    if status is not None and status in shown:
+        shown["status"] = shown[status]
+    return shown
+
+
+def _beyond(point: Point, value: Value, image: Image) -> bool:
+    entity = point.entity
+    if not entity.writable or entity.kind != "number":
+        return False
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return False
+    try:
+        low, high = limits_of(point, image)
+    except MissingDataError:
+        low, high = entity.min, entity.max
+    floor = entity.dangerous_below
+    return any(
+        (
+            low is not None and value < low,
+            high is not None and value > high,
+            floor is not None and value < floor,
+        )
+    )
+
+
 # --- read-only platforms ---------------------------------------------------------------
 
 
@@ -150,7 +203,7 @@ def _state(key: str, context: ComponentContext) -> Config:
 def _sensor(key: str, entity: Entity, context: ComponentContext) -> Config:
     config = _state(key, context)
     if entity.enum is not None:
-        config |= {"device_class": "enum", "options": list(entity.enum.values())}
+        config |= {"device_class": "enum", "options": options_of(key, entity, context)}
     elif entity.kind == "number":
         config |= numeric_sensor_options(key, entity, context)
     return config
@@ -219,7 +272,9 @@ def _number(key: str, entity: Entity, context: ComponentContext) -> Config:
 
 def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[float, float]:
     """Limits read from the device, else the mapping's, else what the register holds;
-    without ``allow_dangerous_writes``, none below ``dangerous_below``."""
+    without ``allow_dangerous_writes``, none below ``dangerous_below``. Widened to the value
+    the device reads now (``context.readings``), which Home Assistant would drop as out of
+    range otherwise; writes stay checked against the limits."""
     raw_low, raw_high = raw_bounds(entity)
     ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
     if entity.sign_from is not None:
@@ -236,11 +291,24 @@ def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[f
     guarded = entity.dangerous_below
     if guarded is not None and not context.allow_dangerous_writes and guarded <= high:
         low = max(low, guarded)  # values below are refused: not offered
+    reading = context.readings.get(key)
+    if isinstance(reading, int | float) and not isinstance(reading, bool):
+        low, high = min(low, reading), max(high, reading)  # what the device holds is shown
     return low, high
 
 
+def options_of(key: str, entity: Entity, context: ComponentContext) -> list[str]:
+    """The enum's labels, and the code the device reads now when the mapping has no label
+    for it (``code_23``): Home Assistant drops a state that is not one of the options."""
+    labels = list((entity.enum or {}).values())
+    reading = context.readings.get(key)
+    if isinstance(reading, str) and is_unknown_code(entity, reading):
+        labels.append(reading)
+    return labels
+
+
 def _select(key: str, entity: Entity, context: ComponentContext) -> Config:
-    return _command(key, entity, context) | {"options": list((entity.enum or {}).values())}
+    return _command(key, entity, context) | {"options": options_of(key, entity, context)}
 
 
 def _switch(key: str, entity: Entity, context: ComponentContext) -> Config:

@@ -8,6 +8,7 @@ next to its bits. Field checks that need no other entity live here; cross-entity
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from enum import StrEnum
 from functools import cached_property
@@ -87,6 +88,7 @@ class Order(StrEnum):
 _STATE_CLASSES = ("measurement", "measurement_angle", "total", "total_increasing")
 _CATEGORIES = ("config", "diagnostic")
 _WIDTH = {DataType.U32: 2, DataType.S32: 2, DataType.F32: 2}
+_UNKNOWN_LABEL = re.compile(r"^code_-?\d+$")  # codec.unknown_code
 
 
 class Presentation(BaseModel):
@@ -384,6 +386,8 @@ def _check_enum(e: Entity) -> str | None:
         return "enum labels must be unique"
     if any(not label.strip() for label in labels):
         return "enum labels cannot be empty"
+    if any(_UNKNOWN_LABEL.match(label) for label in labels):
+        return "enum labels 'code_<n>' are reserved for codes the mapping has no label for"
     return None
 
 

@@ -45,7 +45,9 @@ A counter lower than before (a device rebuilt with fresh counters) counts from z
           "writes_rejected": 0,        refused before reaching the wire (validation, guard,
                                          EEPROM rate limit)
           "writes_failed": 0,          the device or bus did not complete the write
-          "writes_expired": 0          not sent before the command expiry
+          "writes_expired": 0,         not sent before the command expiry
+          "unknown_codes": 0           enum codes read that the mapping has no label for
+                                         (published as code_<n>), counted as they appear
         }
       }
     }
@@ -104,6 +106,7 @@ class DeviceSnapshot:
     consecutive_failures: int = 0
     backoff: float = 0.0
     writes: WriteSnapshot = WriteSnapshot()
+    unknown_codes: int = 0
 
     @property
     def state(self) -> str:
@@ -212,6 +215,7 @@ def _device_report(device: DeviceSnapshot, snapshot: Snapshot) -> dict[str, Any]
         "writes_rejected": writes.rejected,
         "writes_failed": writes.failed,
         "writes_expired": writes.expired,
+        "unknown_codes": device.unknown_codes,
     }
 
 

@@ -19,7 +19,17 @@ from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass
 
 from bridge.core.address import to_wire
-from bridge.core.codec import Image, Value, decode, encode, limits_of, raw_bounds, scale_value
+from bridge.core.codec import (
+    UNKNOWN_CODE,
+    Image,
+    Value,
+    decode,
+    encode,
+    is_unknown_code,
+    limits_of,
+    raw_bounds,
+    scale_value,
+)
 from bridge.core.entity import Access, DataType, Table
 from bridge.core.mapping import Mapping, Point
 from bridge.core.protocol import Protocol
@@ -69,8 +79,13 @@ class Quirks:
 
 def words_for(point: Point, value: object, image: Image) -> dict[Cell, int]:
     """The cells that hold ``value`` at the point's read address (ValueRejectedError if the
-    register cannot hold it, e.g. a sentinel). Access, write address and limits are ignored."""
-    entity = point.entity.model_copy(update=_AS_REGISTER)
+    register cannot hold it, e.g. a sentinel). Access, write address and limits are ignored;
+    an enum takes a code it has no label for as the codec publishes it (``code_23``)."""
+    update: dict[str, object] = dict(_AS_REGISTER)
+    enum = point.entity.enum
+    if enum is not None and isinstance(value, str) and is_unknown_code(point.entity, value):
+        update["enum"] = enum | {int(value.removeprefix(UNKNOWN_CODE)): value}
+    entity = point.entity.model_copy(update=update)
     plain = dataclasses.replace(
         point,
         entity=entity,

@@ -3,8 +3,9 @@
 ``<base>/<device>`` carries every published value by key (numbers as numbers, enums as
 labels, unknown as null), plus ``status`` (the value of the mapping's status entity) and
 ``alarms`` (the names of the active alarms: the key of each alarm bit that is on, the
-label of each fault code that is not normal). Secret and write-only entities are never
-in it. ``<base>/<device>/<key>`` carries the plain value: JSON for numbers, booleans and
+label of each fault code that is not normal, ``<key>_<n>`` for a code the mapping has no
+label for: an unknown code is still an active fault). Secret and write-only entities are
+never in it. ``<base>/<device>/<key>`` carries the plain value: JSON for numbers, booleans and
 null (``23.5``, ``true``, ``null``), the bare text for labels and text.
 """
 
@@ -14,7 +15,7 @@ import json
 from collections.abc import Mapping as AnyMapping
 from typing import Any
 
-from bridge.core.codec import Value
+from bridge.core.codec import UNKNOWN_CODE, Value, is_unknown_code, unknown_code
 from bridge.core.mapping import Mapping, Point
 
 
@@ -29,7 +30,12 @@ def active_alarms(points: AnyMapping[str, Point], values: AnyMapping[str, Value]
     for key, point in points.items():
         if key in values and alarm_active(point, values[key]):
             value = values[key]
-            names.append(value if isinstance(value, str) else key)
+            if not isinstance(value, str):
+                names.append(key)
+            elif is_unknown_code(point.entity, value):
+                names.append(f"{key}_{value.removeprefix(UNKNOWN_CODE)}")
+            else:
+                names.append(value)
     return names
 
 
@@ -42,7 +48,7 @@ def alarm_active(point: Point, value: Value) -> bool:
     if entity.kind == "bool":
         return value is True
     if entity.enum is not None and isinstance(value, str):
-        return value not in {entity.enum.get(raw) for raw in entity.normal}
+        return value not in {entity.enum.get(raw, unknown_code(raw)) for raw in entity.normal}
     return False
 
 

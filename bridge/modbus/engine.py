@@ -184,4 +184,5 @@ def device_snapshot(poller: DevicePoller) -> DeviceSnapshot:
             failed=writes.failed,
             expired=writes.expired,
         ),
+        unknown_codes=poller.unknown_codes,
     )

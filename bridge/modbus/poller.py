@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from bridge.config import DeviceConfig
-from bridge.core.codec import Value, decode
+from bridge.core.codec import Value, decode, is_unknown_code
 from bridge.core.entity import PollClass, Table
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.health import DeviceHealth, HealthPolicy, Outcome, Transition
@@ -94,6 +94,8 @@ class DevicePoller:
         self._polled_once = False
         self.first_poll_done = False  # every class was asked once (answered or not)
         self._last_traffic = 0.0
+        self.unknown_codes = 0  # enum codes read that the mapping has no label for
+        self._unknown_logged: set[tuple[str, Value]] = set()
 
     # --- polling ------------------------------------------------------------------
 
@@ -433,9 +435,25 @@ class DevicePoller:
                 continue
             if key not in self.values or self.values[key] != value:
                 changed.add(key)
+                self._count_unknown(point, value)
             self.values[key] = value
         if changed:
             self._notify(frozenset(changed))
+
+    def _count_unknown(self, point: Point, value: Value) -> None:
+        """Count an enum code the mapping has no label for as it appears (published as
+        ``code_<n>``); say so in the log once per key and code."""
+        if not is_unknown_code(point.entity, value):
+            return
+        self.unknown_codes += 1
+        if (point.key, value) not in self._unknown_logged:
+            self._unknown_logged.add((point.key, value))
+            log.warning(
+                "%s: %s reads %s, a code the mapping has no label for; published as is",
+                self.device.id,
+                point.key,
+                value,
+            )
 
     def _notify(self, changed: frozenset[str]) -> None:
         if self.on_update is not None:

@@ -124,7 +124,7 @@ def test_start_stop(value: bool, frame: str) -> None:
         pytest.param(0x0086, "running", True, id="running-combo"),
         pytest.param(0x0003, "no_water", False, id="no-water"),
         pytest.param(0x008A, "stopping_digital_input", True, id="soft-stop-di-combo"),
-        pytest.param(0x000B, None, False, id="undefined-11"),
+        pytest.param(0x000B, "code_11", False, id="undefined-11"),
     ],
 )
 def test_status_byte(raw: int, state: str | None, combo: bool) -> None:

@@ -174,7 +174,7 @@ def test_status_word(raw: int, status: str, running: bool) -> None:
         (0x06, "overcurrent_constant_speed"),
         (0x0D, "reserved_0d"),
         (0x16, "pid_feedback_lost"),
-        (0x17, None),
+        (0x17, "code_23"),  # reserved in the manual: published by its number, never lost
     ],
 )
 def test_fault_code(raw: int, label: str | None) -> None:

@@ -285,7 +285,7 @@ def test_fault_code_enum_and_plain_active_fault_code() -> None:
     assert decoded(POINTS, "fault_code", image) == "fieldbus_fault"
     assert decoded(POINTS, "active_fault_code", image) == 53
     other = dict.fromkeys(image, 2)  # an NX fault outside the board's list
-    assert decoded(POINTS, "fault_code", other) is None
+    assert decoded(POINTS, "fault_code", other) == "code_2"
     assert decoded(POINTS, "active_fault_code", other) == 2
 
 

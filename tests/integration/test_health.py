@@ -91,7 +91,8 @@ async def running(broker: Broker, **bridge: Any) -> AsyncIterator[Bridge]:
 
 
 def reports(observer: Observer) -> list[dict[str, Any]]:
-    return [json.loads(m.payload) for m in observer.log if m.topic == HEALTH]
+    """The health reports seen (an empty payload clears the retained one: not a report)."""
+    return [json.loads(m.payload) for m in observer.log if m.topic == HEALTH and m.payload]
 
 
 def latest(observer: Observer) -> dict[str, Any]:
@@ -265,6 +266,7 @@ async def test_metrics_endpoint_serves_the_same_counters(mosquitto: Broker) -> N
         faults = sample("modbus_device_exceptions_total", device="faulty", code="4")
         assert before["devices"]["faulty"]["exceptions"]["4"] <= faults
         assert sample("modbus_device_timeouts_total", device="dead") >= 3
+        assert sample("modbus_device_unknown_codes_total", device="pump") == 0
         assert sample("modbus_device_online", device="pump") == 1.0
         assert sample("modbus_device_online", device="dead") == 0.0
         assert sample("modbus_device_consecutive_failures", device="dead") >= 3
@@ -307,6 +309,8 @@ async def test_health_interval_zero_publishes_no_health_and_no_health_sensors(
         finally:
             await cancel(task)
     assert reports(observer) == []
+    cleared = [m for m in observer.log if m.topic == HEALTH]
+    assert all(m.payload == b"" for m in cleared)  # an old retained report is cleared
     assert list(discovery["cmps"]) == ["connection_state"]
 
 

@@ -17,9 +17,10 @@ from typing import Any
 import pytest
 
 from bridge.app import Bridge
-from bridge.config import load_config_data
+from bridge.config import MqttConfig, load_config_data
 from bridge.core.entity import Table
 from bridge.modbus.simulator import Simulator
+from bridge.mqtt.client import MqttClient
 from tests.integration.harness import cancel, eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import Observer, observing
@@ -130,3 +131,68 @@ async def test_a_negative_speed_reference_is_refused_unless_dangerous_writes_are
             (2, VACON_SPEED_REFERENCE, (0,)),
             (3, P2_SET_VALUE, (0xFC18,)),  # -1000 = -10.00 %
         }
+
+
+# --- item 12: a value read is never dropped in Home Assistant --------------------------------
+
+
+def discovery_component(observer: Observer, device_id: str, key: str) -> dict[str, Any]:
+    config = observer.json(f"homeassistant/device/{device_id}/config")
+    component: dict[str, Any] = config["cmps"][key]
+    return component
+
+
+@pytest.mark.asyncio
+async def test_values_home_assistant_would_drop_are_published_and_admitted(
+    mosquitto: Broker,
+) -> None:
+    """A soft-start time reading 0 (range 1-200) and a fault code the mapping has no label for
+    (23): the state carries both, the discovery payload admits both (number range, enum
+    option) before the state arrives, the unknown code is an active alarm and is counted in
+    the health report, which is retained so a late subscriber (Home Assistant subscribing
+    after discovery) has it at once."""
+    sim = simulator((1, "soft_starter"))
+    sim.set_value(1, "soft_start_time", 0)
+    async with (
+        observing(mosquitto, "modbus/#", "homeassistant/#") as observer,
+        bridged(mosquitto, sim, [device("soft_starter")], {"health_interval": 0.5}),
+    ):
+        await online(observer, "soft_starter")
+        topic = "modbus/soft_starter"
+        await eventually(lambda: topic in observer.retained)
+        assert observer.json(topic)["soft_start_time"] == 0
+        await eventually(
+            lambda: discovery_component(observer, "soft_starter", "soft_start_time")["min"] == 0
+        )
+        number = discovery_component(observer, "soft_starter", "soft_start_time")
+        assert (number["min"], number["max"]) == (0, 200)
+        seen = len(observer.log)
+        sim.set_value(1, "fault_status", "code_23")
+        await eventually(lambda: observer.json(topic)["fault_status"] == "code_23", timeout=10)
+        assert "fault_status_23" in observer.json(topic)["alarms"]
+        await eventually(lambda: observer.retained[f"{topic}/fault_status"] == b"code_23")
+        options = discovery_component(observer, "soft_starter", "fault_status")["options"]
+        assert options[-1] == "code_23"
+        config_at = max(
+            i for i, m in enumerate(observer.log) if m.topic.endswith("soft_starter/config")
+        )
+        first_state = min(
+            i
+            for i, m in enumerate(observer.log)
+            if i >= seen and m.topic == topic and json.loads(m.payload)["fault_status"] == "code_23"
+        )
+        assert config_at < first_state  # the payload admits the code before the state says it
+        await eventually(
+            lambda: any(
+                json.loads(m.payload)["devices"]["soft_starter"]["unknown_codes"] >= 1
+                for m in observer.after(seen, "modbus/bridge/health")
+                if m.payload
+            )
+        )
+        config = MqttConfig(url=mosquitto.url)
+        async with MqttClient(config, will_topic="late/state", client_id="late") as late:
+            await late.subscribe("modbus/bridge/health")
+            async with asyncio.timeout(5):
+                first = await anext(late.messages())
+            assert first.retain  # sent at subscription, not one health interval later
+            assert "soft_starter" in json.loads(first.payload)["devices"]

@@ -49,7 +49,8 @@ DECODE_CASES = [
     ("nibble", {"bit": 0, "width": 4}, [0x86], 6),
     ("nibble high", {"bit": 4, "width": 4}, [0x86], 8),
     ("enum", {"enum": {0: "off", 6: "running"}}, [6], "running"),
-    ("enum unknown", {"enum": {0: "off"}}, [9], None),
+    ("enum unknown", {"enum": {0: "off"}}, [9], "code_9"),  # never lost: code_<n>
+    ("enum unknown s16", {"enum": {0: "off"}, "type": "s16"}, [0xFFFF], "code_-1"),
     ("enum field", {"bit": 0, "width": 4, "enum": {6: "running"}}, [0x86], "running"),
     ("sentinel", {"sentinels": {0xFFFF: "none"}}, [0xFFFF], None),
     ("s16 sentinel", {"type": "s16", "sentinels": {32766: "open"}}, [32766], None),

@@ -155,6 +155,11 @@ def test_state_document_and_alarms() -> None:
     assert active_alarms(points, {"fault": "none", "dry_running": False}) == []
 
 
+def test_a_fault_code_without_a_label_is_still_an_active_alarm() -> None:
+    points = MAPPING.points()
+    assert active_alarms(points, {"fault": "code_23", "dry_running": False}) == ["fault_23"]
+
+
 @pytest.mark.parametrize(
     ("value", "payload"),
     [(4.5, "4.5"), (45, "45"), (True, "true"), (None, "null"), ("running", "running")],

@@ -28,6 +28,8 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
+from bridge.core.discovery_entity import shown_readings
+from bridge.core.entity import Table
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, build_health_report
 from bridge.core.mapping import Mapping, builtin_mapping_names, builtin_mapping_path, load_mapping
 from bridge.core.simulation import initial_image
@@ -60,7 +62,9 @@ def _cmps(entities: dict[str, dict[str, Any]], **kwargs: Any) -> dict[str, Any]:
     """The components built for a mapping of ``entities`` (kwargs: DeviceInfo fields,
     units, limits, state_refresh, or mapping top-level fields prefixed ``mapping_``)."""
     top = {k.removeprefix("mapping_"): v for k, v in kwargs.items() if k.startswith("mapping_")}
-    build = {k: kwargs.pop(k) for k in ("units", "limits", "state_refresh") if k in kwargs}
+    build = {
+        k: kwargs.pop(k) for k in ("units", "limits", "readings", "state_refresh") if k in kwargs
+    }
     fields = {k: v for k, v in kwargs.items() if not k.startswith("mapping_")}
     device = _device(make_mapping(entities, **top), **fields)
     payload = build_device_discovery(device, TOPICS, ORIGIN, **build)
@@ -831,3 +835,68 @@ def test_entity_mode_snapshot() -> None:
             for m in messages
         ],
     )
+
+
+# --- a value read is never dropped: the payload admits what the device holds (issue 12) ------
+
+
+def test_an_enum_code_without_a_label_becomes_an_option_while_it_is_read() -> None:
+    entities = {
+        "mode": {"name": "Mode", "address": 0, "enum": {0: "auto", 1: "manual"}},
+        "speed": {"name": "Speed", "address": 1, "access": "rw", "enum": {0: "low", 1: "high"}},
+    }
+    readings = {"mode": "code_23", "speed": "code_7"}
+    cmps = _cmps(entities, mapping_status="mode", readings=readings)
+    assert cmps["mode"]["options"] == ["auto", "manual", "code_23"]
+    assert cmps["mode"]["device_class"] == "enum"
+    assert cmps["speed"]["options"] == ["low", "high", "code_7"]
+    plain = _cmps(entities, mapping_status="mode", readings={"mode": "manual"})
+    assert plain["mode"]["options"] == ["auto", "manual"]
+
+
+def test_the_status_component_admits_the_status_entity_s_unknown_code() -> None:
+    entities = {"state": {"name": "State", "address": 0, "enum": {0: "off", 1: "on"}}}
+    mapping = make_mapping(entities, status="state")
+    image = {(Table.HOLDING, 0): 9}
+    values = {"state": "code_9"}
+    shown = shown_readings(mapping.points(), values, image, "state")
+    assert shown == {"state": "code_9", "status": "code_9"}
+    cmps = _cmps(entities, mapping_status="state", readings=shown)
+    assert cmps["status"]["options"] == ["off", "on", "code_9"]
+
+
+@pytest.mark.parametrize(
+    ("entity", "reading", "bounds"),
+    [
+        ({"min": 1, "max": 9999}, 0, (0, 9999)),  # an unconfigured parameter reads 0
+        ({"min": 1, "max": 9999}, 12000, (1, 12000)),
+        ({"min": 1, "max": 9999}, 50, (1, 9999)),
+        ({"type": "s16", "scale": 0.01, "min": -100, "max": 100, "dangerous_below": 0}, -5.5,
+         (-5.5, 100)),  # a negative reference read is shown, though not offered for writing
+    ],
+)  # fmt: skip
+def test_a_number_range_covers_the_value_the_device_reads(
+    entity: dict[str, Any], reading: float, bounds: tuple[float, float]
+) -> None:
+    config = _one({"access": "rw"} | entity, readings={"value": reading})
+    assert _bounds(config) == bounds
+
+
+def test_shown_readings_are_the_values_home_assistant_would_drop() -> None:
+    entities = {
+        "ramp": {"name": "Ramp", "address": 0, "access": "rw", "min": 1, "max": 300},
+        "low": {"name": "Low", "address": 1, "access": "rw", "max": 50},
+        "freq": {"name": "Freq", "address": 2, "access": "rw", "min_from": "low"},
+        "temp": {"name": "Temp", "address": 3, "ha": {"state_class": "measurement"}},
+        "mode": {"name": "Mode", "address": 4, "enum": {0: "a"}},
+        "ref": {"name": "Ref", "address": 5, "access": "rw", "type": "s16",
+                "dangerous_below": 0},
+    }  # fmt: skip
+    points = make_mapping(entities).points()
+    image = {(Table.HOLDING, a): 0 for a in range(6)} | {(Table.HOLDING, 1): 20}
+    values = {"ramp": 0, "low": 20, "freq": 10, "temp": 99999, "mode": "a", "ref": -3}
+    assert shown_readings(points, values, image) == {"ramp": 0, "freq": 10, "ref": -3}
+    values |= {"ramp": 5, "freq": 25, "mode": "code_4", "ref": 0}
+    assert shown_readings(points, values, image) == {"mode": "code_4"}
+    del image[(Table.HOLDING, 1)]  # the limit register not read yet: the static limits
+    assert shown_readings(points, values | {"freq": 10}, image) == {"mode": "code_4"}

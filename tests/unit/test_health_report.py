@@ -67,6 +67,7 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
         latency_p95=0.04567,
         last_success=1119.5,
         writes=WriteSnapshot(done=3, skipped_unchanged=1, rejected=2, failed=1, expired=4),
+        unknown_codes=5,
     )
     current = _snapshot(1120.0, buses=(bus,), devices=(device,))
 
@@ -108,6 +109,7 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
                 "writes_rejected": 2,
                 "writes_failed": 1,
                 "writes_expired": 4,
+                "unknown_codes": 5,
             }
         },
     }

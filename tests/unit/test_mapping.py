@@ -157,6 +157,7 @@ def test_fc16_only_device_writes_single_registers_with_16() -> None:
         ({"scale": 0}, "scale cannot be 0"),
         ({"enum": {0: "a"}, "scale": 0.1}, "scale/offset apply to numbers"),
         ({"enum": {0: "a", 1: "a"}}, "enum labels must be unique"),
+        ({"enum": {0: "a", 23: "code_23"}}, "reserved for codes the mapping has no label"),
         ({"type": "f32", "enum": {0: "a"}}, "enum needs an integer type"),
         ({"min": 5, "max": 1}, "min 5.0 is above max 1.0"),
         ({"type": "s16", "sign_from": "x"}, "sign_from takes a magnitude"),
