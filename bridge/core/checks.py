@@ -248,7 +248,9 @@ def _clash(e1: Entity, s1: int, e2: Entity, s2: int) -> str | None:
         return None  # a derived boolean view of a value, e.g. "protection enabled"
     w1, w2 = e1.field_width, e2.field_width
     if w1 is None and w2 is None:
-        return "a second whole value on the same register"
+        return (
+            None if _code_and_label(e1, s1, e2, s2) else "a second whole value on the same register"
+        )
     if e1.register_count > 1 or e2.register_count > 1 or s1 != s2:
         return "a bit field inside a multi-register value"
     if w1 is not None and w2 is not None:
@@ -257,6 +259,21 @@ def _clash(e1: Entity, s1: int, e2: Entity, s2: int) -> str | None:
         if bits1 & bits2:
             return "overlapping bit fields"
     return None
+
+
+def _code_and_label(e1: Entity, s1: int, e2: Entity, s2: int) -> bool:
+    """A read-only code published twice: as its number and as the enum of its labels (a
+    fault code whose list the manual gives only in part)."""
+    return (
+        s1 == s2
+        and not e1.writable
+        and not e2.writable
+        and (e1.enum is None) != (e2.enum is None)
+        and e1.data_type is e2.data_type
+        and e1.register_count == e2.register_count
+        and e1.scale == e2.scale == 1.0
+        and e1.offset == e2.offset == 0.0
+    )
 
 
 def _reserved_hits(

@@ -146,15 +146,19 @@ def _slots(points: AnyMapping[str, Point]) -> dict[str, int]:
 
 
 def _owns_value(point: Point, points: AnyMapping[str, Point]) -> bool:
-    """False for write-only points, derived booleans, and whole words that only show the
-    bit fields other points own (those follow from the fields)."""
+    """False for write-only points, derived booleans, whole words that only show the bit
+    fields other points own (those follow from the fields), and a code's number beside its
+    enum of labels (the enum picks a code it knows)."""
     entity = point.entity
     if not entity.readable or entity.on_when is not None:
         return False
     if entity.field_width is not None:
         return True
     return not any(
-        other.entity.field_width is not None
+        (
+            other.entity.field_width is not None
+            or (other.entity.enum is not None and other.entity.readable and entity.enum is None)
+        )
         and other.table is point.table
         and other.span == point.span
         for other in points.values()

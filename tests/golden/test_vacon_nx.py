@@ -17,6 +17,7 @@ from bridge.core.address import to_wire
 from bridge.core.codec import Image, encode
 from bridge.core.entity import Table
 from bridge.core.request import Read, Write
+from bridge.core.state import active_alarms
 from bridge.errors import ValueRejectedError
 from bridge.modbus.frame import FrameError, build_frame, exception_code, parse_frame
 from tests.golden.frames import decoded, hexbytes, image_from, read_of, request_frame, shipped
@@ -277,16 +278,29 @@ def test_monitor_current_resolution_option() -> None:
     assert decoded(fine, "monitor_motor_current", image) == 12.34
 
 
-def test_fault_code_enum_and_plain_active_fault_code() -> None:
-    image = {
-        (Table.HOLDING, POINTS["fault_code"].address): 53,
-        (Table.HOLDING, POINTS["active_fault_code"].address): 53,
-    }
-    assert decoded(POINTS, "fault_code", image) == "fieldbus_fault"
-    assert decoded(POINTS, "active_fault_code", image) == 53
-    other = dict.fromkeys(image, 2)  # an NX fault outside the board's list
-    assert decoded(POINTS, "fault_code", other) == "code_2"
-    assert decoded(POINTS, "active_fault_code", other) == 2
+@pytest.mark.parametrize(
+    ("raw", "label", "alarms"),
+    [
+        (0, "no_fault", []),
+        (53, "fieldbus_fault", ["fieldbus_fault"]),  # seed ch. 8 row 53
+        (1, "code_1", ["fault_code_1"]),  # an overcurrent: no label in the seed, still a fault
+        (2, "code_2", ["fault_code_2"]),
+    ],
+)
+def test_fault_code_is_published_as_a_number_and_a_label(
+    raw: int, label: str, alarms: list[str]
+) -> None:
+    """ID 99 holds any NX fault number: "Fault number" is the number, "Fault code" its label
+    where the seed names it (code_<n> otherwise), and a fault without a label is an alarm."""
+    read = read_of(POINTS, "fault_number")
+    assert read == read_of(POINTS, "fault_code")
+    assert request_frame(read) == hexbytes("01 03 00 62 00 01 25 D4")  # §8 "Read fault code"
+    image = {(Table.HOLDING, read.address): raw, (Table.HOLDING, 2110): raw}
+    assert decoded(POINTS, "fault_number", image) == raw
+    assert decoded(POINTS, "fault_code", image) == label
+    assert decoded(POINTS, "active_fault_code", image) == raw  # PD Out 8
+    values = {key: decoded(POINTS, key, image) for key in ("fault_number", "fault_code")}
+    assert active_alarms(POINTS, values) == alarms
 
 
 def test_every_button_press_encodes() -> None:

@@ -349,6 +349,11 @@ def test_reference_missing_for_some_options_is_an_error() -> None:
         ({"address": 1, "type": "u32"}, {"address": 2, "bit": 0}, "a bit field inside a multi"),
         ({"address": 1, "bit": 0, "width": 4}, {"address": 1, "bit": 3}, "overlapping bit fields"),
         ({"address": 1, "table": "coil"}, {"address": 1, "table": "coil"}, "a second whole value"),
+        # a code and its labels: only both read-only, unscaled, of one type
+        ({"address": 1}, {"address": 1, "enum": {0: "a"}, "access": "rw"}, "a second whole"),
+        ({"address": 1, "scale": 0.1}, {"address": 1, "enum": {0: "a"}}, "a second whole value"),
+        ({"address": 1, "type": "s16"}, {"address": 1, "enum": {0: "a"}}, "a second whole value"),
+        ({"address": 1, "enum": {0: "b"}}, {"address": 1, "enum": {0: "a"}}, "a second whole"),
     ],
 )
 def test_overlaps_that_make_no_sense(first: dict, second: dict, problem: str) -> None:
@@ -369,6 +374,8 @@ def test_overlaps_that_make_sense() -> None:
             "vb": {"name": "VB", "address": 3, "when": {"m": "b"}},
             "cmd_run": {"name": "Run", "address": 4, "access": "w", "press": 1},
             "cmd_stop": {"name": "Stop", "address": 4, "access": "w", "press": 6},
+            "fault_number": {"name": "Fault number", "address": 5},
+            "fault_code": {"name": "Fault", "address": 5, "enum": {0: "none"}, "alarm": True},
             "coil_alarm": {"name": "Alarm", "address": 0, "table": "coil"},
             "coil_start": {
                 "name": "Start",
