@@ -259,6 +259,13 @@ class DeviceConfig(_Strict):
     options: dict[str, str] = Field(default_factory=dict)
     protocol: ProtocolOverride = ProtocolOverride()
     allow_dangerous_writes: bool = Field(False, description="permit writes marked dangerous")
+    password: SecretStr | None = Field(
+        None, description="the device's user password (a mapping with protocol.unlock)"
+    )
+    password_file: Path | None = Field(None, description="a file holding the device password")
+    password_env: str | None = Field(
+        None, description="an environment variable holding the device password"
+    )
     enabled: bool = True
 
     @field_validator("id")
@@ -266,9 +273,34 @@ class DeviceConfig(_Strict):
     def _check_id(cls, value: str) -> str:
         return _check_identifier(value)
 
+    @model_validator(mode="after")
+    def _one_password_source(self) -> Self:
+        given = [self.password, self.password_file, self.password_env]
+        if sum(value is not None for value in given) > 1:
+            raise ValueError("give one of password, password_file, password_env")
+        return self
+
     @property
     def display_name(self) -> str:
         return self.name or self.id.replace("_", " ").capitalize()
+
+    @property
+    def has_password(self) -> bool:
+        return any(v is not None for v in (self.password, self.password_file, self.password_env))
+
+    def password_value(self) -> str | None:
+        """The device password from whichever source is configured (read now, never
+        logged); None when none is configured or its source is gone."""
+        if self.password is not None:
+            return self.password.get_secret_value()
+        try:
+            if self.password_file is not None:
+                return self.password_file.read_text(encoding="utf-8").strip()
+        except OSError:
+            return None
+        if self.password_env is not None:
+            return os.environ.get(self.password_env)
+        return None
 
 
 class MetricsConfig(_Strict):
@@ -419,6 +451,7 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
     mappings, errors = _load_mappings(config.buses, config.devices, path.parent)
     errors += secret_errors(config.mqtt)
     errors += _web_token_errors(config.bridge.web)
+    errors += _device_password_errors(config.devices, mappings)
     errors += topic_errors(config.mqtt, config.devices, mappings)
     errors += folder_errors(config.bridge, path.parent)
     if errors:
@@ -520,6 +553,40 @@ def _web_token_errors(web: WebConfig) -> list[str]:
     if len(token) < MIN_TOKEN:
         return [f"{where}: the token is missing or shorter than {MIN_TOKEN} characters"]
     return []
+
+
+def _device_password_errors(
+    devices: Iterable[DeviceConfig], mappings: dict[str, Mapping]
+) -> list[str]:
+    """A device password needs a mapping that unlocks with one, a source that holds it,
+    and a number the device register takes (0..65535); the value is never shown."""
+    errors: list[str] = []
+    for device in devices:
+        if not device.has_password:
+            continue
+        where = f"devices.{device.id}"
+        field = next(
+            name
+            for name in ("password", "password_file", "password_env")
+            if getattr(device, name) is not None
+        )
+        mapping = mappings.get(device.id)
+        if mapping is not None and mapping.protocol.unlock is None:
+            errors.append(f"{where}.{field}: the mapping {device.mapping} has no password unlock")
+            continue
+        if device.password_file is not None and not device.password_file.is_file():
+            errors.append(f"{where}.password_file: no such file {str(device.password_file)!r}")
+        elif device.password_env is not None and device.password_env not in os.environ:
+            errors.append(
+                f"{where}.password_env: environment variable {device.password_env} is not set"
+            )
+        elif not _is_register_number(device.password_value()):
+            errors.append(f"{where}.{field}: the password must be a number 0..65535")
+    return errors
+
+
+def _is_register_number(text: str | None) -> bool:
+    return text is not None and text.isdigit() and int(text) <= 0xFFFF
 
 
 def config_schema() -> dict[str, Any]:

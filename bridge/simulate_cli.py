@@ -100,6 +100,13 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         action="store_true",
         help="FC03 replies with a 2-byte byte count (P2 with F9.05 = 0)",
     )
+    quirks.add_argument(
+        "--locked",
+        type=int,
+        metavar="PASSWORD",
+        help="locked by this user password until it is written to the unlock register "
+        "(a mapping with protocol.unlock: the P2)",
+    )
     sim.set_defaults(handler=run_simulate)
 
 
@@ -123,6 +130,7 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
             latency=args.latency,
             dead=unit in args.dead,
             two_byte_count=args.two_byte_count,
+            password=args.locked if mapping.protocol.unlock is not None else None,
         )
         units.append(SimulatedUnit(unit, mapping, mine, quirks))
     try:

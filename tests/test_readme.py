@@ -25,7 +25,8 @@ BLOCKS = re.findall(r"```yaml\n(.*?)```", README, flags=re.DOTALL)
 
 def test_readme_config_example_is_valid() -> None:
     config = Config.model_validate(parse_yaml(BLOCKS[0], "README config"))
-    assert [d.id for d in config.devices] == ["borehole_pump"]
+    assert [d.id for d in config.devices] == ["borehole_pump", "fan_drive"]
+    assert config.devices[1].password_env == "P2_PASSWORD"
 
 
 def test_readme_mapping_example_is_valid_and_decodes() -> None:

@@ -66,6 +66,7 @@ class Fault(StrEnum):
     NO_ANSWER = "no_answer"  # timeouts, failure exceptions
     REFUSES = "refuses"  # refused every read of its polls
     BUSY = "busy"  # answered only "busy"
+    LOCKED = "locked"  # locked by a password the bridge cannot unlock (``lock_reason``)
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +97,7 @@ class DeviceHealth:
     backoff: float = 0.0
     next_attempt: float = 0.0
     fault: Fault | None = None  # why it is offline
+    lock_reason: str = ""  # Fault.LOCKED: why the device stays locked
     busy_streak: int = 0  # busy answers since the last value
     busy_since: float = 0.0  # the first of them
     latencies: deque[float] = field(default_factory=lambda: deque(maxlen=256))
@@ -133,8 +135,18 @@ class DeviceHealth:
         self.refusal_faults += 1
         return self._failure(Fault.REFUSES, now)
 
+    def locked(self, now: float, reason: str) -> Transition | None:
+        """The device is locked by a password the bridge cannot unlock: offline at once,
+        with the reason (its probes answer 'locked' until someone fixes the password)."""
+        self.lock_reason = reason
+        self.consecutive_failures = max(self.consecutive_failures, self.policy.offline_after)
+        self.fault = Fault.LOCKED
+        return self._offline(Fault.LOCKED, now)
+
     def offline_reason(self, now: float) -> str:
         """Why the device is offline, for the log: 'after 3 failed requests'."""
+        if self.fault is Fault.LOCKED:
+            return f"({self.lock_reason})"
         if self.fault is Fault.BUSY:
             return f"after {now - self.busy_since:.0f} s: answers only 'busy'"
         if self.fault is Fault.REFUSES:

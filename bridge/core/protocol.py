@@ -37,6 +37,21 @@ class Keepalive(BaseModel):
     note: str | None = None
 
 
+class Unlock(BaseModel):
+    """A device locked by a user password: it answers every request with an exception of
+    action ``locked`` until the password is written (FC06) to ``address``. The bridge then
+    writes the device's configured password once and sends the request again; an answer of
+    ``wrong_password`` to that write means the password is wrong (the device is put in
+    error, no second try). ``success``: the code the device answers on success, in the
+    write's echo or read from ``address`` afterwards."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    address: PrintedAddress
+    success: int | None = Field(None, ge=0, le=0xFFFF)
+    wrong_password: int = Field(1, ge=1, le=255, description="exception code of a wrong password")
+
+
 class Segment(BaseModel):
     """An address range a read may not cross, with an optional tighter read limit."""
 
@@ -87,6 +102,7 @@ class Protocol(BaseModel):
     min_request_interval: Duration = Field(0.0, description="silence between two requests")
     response_timeout: Duration = 1.0
     keepalive: Keepalive | None = None
+    unlock: Unlock | None = Field(None, description="password unlock (the device's password)")
     eeprom_write_interval: Duration = Field(
         10.0, description="least time between two writes of one EEPROM-backed register"
     )

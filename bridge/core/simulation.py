@@ -72,6 +72,7 @@ class Quirks:
     latency: float = 0.0  # seconds added before every answer
     dead: bool = False  # no answer at all
     two_byte_count: bool = False  # RTU FC03 replies carry a 2-byte byte count (P2 F9.05 = 0)
+    password: int | None = None  # locked (protocol.unlock) until this is written to unlock
 
 
 # --- storing values -------------------------------------------------------------------

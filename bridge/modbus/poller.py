@@ -20,7 +20,7 @@ from bridge.config import DeviceConfig
 from bridge.core.codec import Value, decode, is_unknown_code
 from bridge.core.entity import PollClass, Table
 from bridge.core.guard import UNGUARDED, Guard
-from bridge.core.health import DeviceHealth, HealthPolicy, Outcome, Transition
+from bridge.core.health import DeviceHealth, Fault, HealthPolicy, Outcome, Transition
 from bridge.core.mapping import Mapping, Point, printed_address
 from bridge.core.planner import ReadLimits, addresses_of, limits_for, plan_reads
 from bridge.core.protocol import Protocol
@@ -37,6 +37,7 @@ from bridge.errors import (
     ModbusError,
 )
 from bridge.modbus.scheduler import BusScheduler, Priority
+from bridge.modbus.unlock import Unlocker
 from bridge.modbus.writer import DeviceWriter, WriteCounters
 
 log = logging.getLogger(__name__)
@@ -85,6 +86,7 @@ class DevicePoller:
         self.on_update = on_update
         self.health = DeviceHealth(policy)
         self.writer = DeviceWriter(self)
+        self.unlocker = Unlocker(device, self.protocol)
         self.image: dict[Address, int] = {}
         self.values: dict[str, Value] = {}
         self.refusals = RefusalMemory(policy.refusal_recheck)
@@ -351,6 +353,27 @@ class DevicePoller:
         retries: int | None = None,
         deadline: float | None = None,
     ) -> tuple[int, ...]:
+        """One request through the bus scheduler, its outcome counted. A device locked by
+        a password is unlocked once and the request sent again (bridge/modbus/unlock.py)."""
+        return await self.unlocker.submit(
+            lambda: self._submit(request, priority, retries, deadline),
+            lambda write: self._submit(write, Priority.WRITE, 0, None),
+            self._locked_out,
+        )
+
+    def _locked_out(self, reason: str) -> None:
+        """The device stays locked: in error with the reason (logged once), offline."""
+        if self.health.fault is not Fault.LOCKED:
+            log.error("%s: %s", self.device.id, reason)
+            self._announce(self.health.locked(time.monotonic(), reason), first_contact=False)
+
+    async def _submit(
+        self,
+        request: Read | Write | WriteSequence,
+        priority: Priority,
+        retries: int | None,
+        deadline: float | None,
+    ) -> tuple[int, ...]:
         if retries is None:  # reads are not resent: the next cycle reads again
             retries = 0
         started = time.monotonic()
@@ -371,9 +394,11 @@ class DevicePoller:
             self._record(Outcome.TIMEOUT)
             raise
         except DeviceExceptionError as exc:
-            outcome = {"busy": Outcome.BUSY, "fail": Outcome.FAILED}.get(
-                exc.action, Outcome.REFUSED
-            )
+            outcome = {
+                "busy": Outcome.BUSY,
+                "fail": Outcome.FAILED,
+                "locked": Outcome.FAILED,
+            }.get(exc.action, Outcome.REFUSED)
             self._record(outcome, code=exc.code)
             raise
         self._record(Outcome.OK, latency=time.monotonic() - started)

@@ -44,6 +44,7 @@ from pymodbus.pdu.bit_message import ReadCoilsRequest, ReadDiscreteInputsRequest
 from pymodbus.server import ModbusBaseServer, ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from bridge.core.address import to_wire
 from bridge.core.codec import Value, decode
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping, Point
@@ -135,11 +136,13 @@ class _Device:
         self.quirks = spec.quirks
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
+        self.unlocked = False  # Quirks.password: the right password was written
 
     def set_quirks(self, quirks: Quirks) -> None:
         _check_quirks(quirks)
         self.rules = build_rules(self.mapping, self.points, quirks)
         self.quirks = quirks
+        self.unlocked = False  # a password quirk locks the unit (again)
 
     def point(self, key: str) -> Point:
         try:
@@ -173,18 +176,24 @@ class _Device:
             return None
         if self.quirks.latency > 0:
             await asyncio.sleep(self.quirks.latency)
+        locked = self._locked(function_code, address, values)
         if values is None:
             size = _BIT_COUNT.get() if table.is_bits else count
-            code = self._refusal(function_code) or self.rules.check_read(table, address, size)
+            code = (
+                locked
+                or self._refusal(function_code)
+                or self.rules.check_read(table, address, size)
+            )
             if code is None:
                 self._fill(table, start, address, count, registers)
         else:
             write = Write(function_code, table, address, tuple(int(v) for v in values))
             self.record(self.unit, write, received)
-            code = self._refusal(function_code) or self.rules.check_write(write)
+            code = locked or self._refusal(function_code) or self.rules.check_write(write)
             if code is None:
                 if not (table is Table.COIL and address in self.rules.commands):
                     self.image |= stored_cells(write)
+                    self._take_password(write)
                 self.image |= follow(self.behaviour, write, self.image)  # start, stop, reset
         return None if code is None else ExcCodes(code)
 
@@ -194,6 +203,31 @@ class _Device:
             return self.movers
         still = {point.key for point in self.behaviour.motion}
         return tuple(mover for mover in self.movers if mover.point.key not in still)
+
+    def _locked(self, function_code: int, address: int, values: object) -> int | None:
+        """``Quirks.password``: the exception a locked unit answers (its protocol's
+        ``locked`` code to everything; ``wrong_password`` to a wrong password write), or
+        None when the request is served."""
+        unlock = self.mapping.protocol.unlock
+        if self.quirks.password is None or self.unlocked or unlock is None:
+            return None
+        locked = next(
+            (c for c, m in self.mapping.protocol.exceptions.items() if m.action == "locked"), 7
+        )
+        wire = to_wire(unlock.address, self.mapping.protocol.addressing)
+        if function_code != 6 or address != wire or not isinstance(values, list):
+            return locked
+        return None if values == [self.quirks.password] else unlock.wrong_password
+
+    def _take_password(self, write: Write) -> None:
+        """A right password unlocks; the unlock register then holds the success code (the
+        write's echo)."""
+        unlock = self.mapping.protocol.unlock
+        if self.quirks.password is None or self.unlocked or unlock is None:
+            return
+        self.unlocked = True
+        if unlock.success is not None:
+            self.image[(Table.HOLDING, write.address)] = unlock.success
 
     def _refusal(self, function_code: int) -> int | None:
         """The exception any request gets from this unit now: its quirk, or 01."""

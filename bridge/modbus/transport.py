@@ -164,8 +164,8 @@ class Transport:
             code = int(response.exception_code)
             meaning = exception_meaning(code, STANDARD)  # the scheduler applies the device's
             raise DeviceExceptionError(code, meaning.name, meaning.action)
-        if isinstance(request, Write):
-            return ()
+        if isinstance(request, Write):  # the echo of a single-register write: some devices
+            return tuple(response.registers) if request.function == 6 else ()  # answer a code
         return response_values(response, request)
 
 

@@ -213,7 +213,7 @@ async def test_write_then_read_back() -> None:
     sim = simulator((1, "nastec_vasco"), (2, "soft_starter"))
     async with serving_tcp(sim) as port, open_bus(tcp_bus(port)) as submit:
         single = raw_write("holding", 54, [123])
-        assert await submit(1, single, 1.0) == ()
+        assert await submit(1, single, 1.0) == (123,)  # FC06: the unit's echo
         assert await submit(1, raw_read(HOLDING, 54), 1.0) == (123,)
         several = raw_write(HOLDING, 4097, [7, 0x0008])
         await submit(2, several, 1.0)

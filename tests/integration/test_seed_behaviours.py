@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import pytest
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
 from bridge.core.entity import Table
-from bridge.modbus.simulator import Simulator
+from bridge.modbus.simulator import Quirks, Simulator
 from bridge.mqtt.client import MqttClient
 from tests.integration.harness import cancel, eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
@@ -196,3 +197,83 @@ async def test_values_home_assistant_would_drop_are_published_and_admitted(
                 first = await anext(late.messages())
             assert first.retain  # sent at subscription, not one health interval later
             assert "soft_starter" in json.loads(first.payload)["devices"]
+
+
+# --- item 8: the P2 password unlock -------------------------------------------------------
+
+P2_PASSWORD = 12345  # devices doc §9 frame D15: 01 06 1F 00 30 39 5A 0C
+UNLOCK = 0x1F00
+
+
+def password_writes(sim: Simulator, unit: int = 1) -> list[Any]:
+    return [w for w in writes_to(sim, unit) if w.address == UNLOCK]
+
+
+@pytest.mark.asyncio
+async def test_a_locked_p2_is_unlocked_once_with_its_password(
+    mosquitto: Broker, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The drive answers 07 to everything until 12345 is written to 1F00H (echo 8888H): the
+    bridge writes it once, the device comes online with its values, and the password is in
+    no MQTT message and no log line; locked again later, it is unlocked again, once."""
+    caplog.set_level(logging.DEBUG)
+    monkeypatch.setenv("P2_PASSWORD", str(P2_PASSWORD))
+    sim = simulator((1, "p2_vfd"), password=P2_PASSWORD)
+    async with (
+        observing(mosquitto, "modbus/#", "homeassistant/#") as observer,
+        bridged(mosquitto, sim, [device("p2_vfd", password_env="P2_PASSWORD")]) as running,
+    ):
+        await online(observer, "p2_vfd")
+        await eventually(lambda: "status" in observer.json("modbus/p2_vfd"))
+        assert observer.json("modbus/p2_vfd")["status"] == "running_forward"
+        assert [(w.function, w.values) for w in password_writes(sim)] == [(6, (P2_PASSWORD,))]
+        assert sim.image(1)[(H, UNLOCK)] == 0x8888  # the echo the bridge got
+        poller = running.engine.devices["p2_vfd"]
+        sim.set_quirks(1, Quirks(password=P2_PASSWORD))  # power cycle: locked again
+        polls = poller.health.requests
+        await eventually(lambda: poller.health.requests > polls + 10)
+        assert len(password_writes(sim)) == 2
+        assert poller.health.online is True
+        info = observer.retained["modbus/bridge/info"].decode()
+        assert "P2_PASSWORD" in info  # the variable's name, never its value
+    secret = str(P2_PASSWORD)
+    assert not any(secret in m.payload.decode(errors="replace") for m in observer.log)
+    assert secret not in caplog.text
+    assert "unlocked with its password" in caplog.text
+
+
+@pytest.mark.asyncio
+async def test_a_wrong_p2_password_puts_the_device_in_error_without_a_second_try(
+    mosquitto: Broker, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Exception 01 to the password write: one write, the device offline with the reason
+    in the log once, and polls that follow never write the password again."""
+    monkeypatch.setenv("P2_PASSWORD", "4321")
+    sim = simulator((1, "p2_vfd"), password=P2_PASSWORD)
+    async with (
+        observing(mosquitto, "modbus/#") as observer,
+        bridged(mosquitto, sim, [device("p2_vfd", password_env="P2_PASSWORD")]) as running,
+    ):
+        poller = running.engine.devices["p2_vfd"]
+        await eventually(lambda: observer.retained.get("modbus/p2_vfd/availability") == b"offline")
+        requests = poller.health.requests
+        await eventually(lambda: poller.health.requests > requests, timeout=15)  # a probe
+        assert [w.values for w in password_writes(sim)] == [(4321,)]
+    errors = [r for r in caplog.records if r.levelno == logging.ERROR]
+    assert [r.getMessage().split(":")[1].strip() for r in errors] == ["wrong password"]
+    assert caplog.text.count("offline (wrong password") == 1
+    assert "4321" not in caplog.text
+
+
+@pytest.mark.asyncio
+async def test_a_locked_p2_without_a_password_says_what_to_configure(
+    mosquitto: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    sim = simulator((1, "p2_vfd"), password=P2_PASSWORD)
+    async with (
+        observing(mosquitto, "modbus/#") as observer,
+        bridged(mosquitto, sim, [device("p2_vfd")]),
+    ):
+        await eventually(lambda: observer.retained.get("modbus/p2_vfd/availability") == b"offline")
+    assert password_writes(sim) == []
+    assert "set devices.p2_vfd.password_env or devices.p2_vfd.password_file" in caplog.text

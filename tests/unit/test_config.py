@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -261,3 +262,49 @@ def test_mapping_dirs_must_exist(tmp_path: Path) -> None:
     assert issues(tmp_path, text) == ("bridge.mapping_dirs: no such folder 'maps'",)
     (tmp_path / "maps").mkdir()
     assert load_config(write(tmp_path, text)).config.bridge.mapping_dirs == [Path("maps")]
+
+
+DRIVE = """
+buses:
+  - {id: rs485, transport: rtu, port: /dev/ttyUSB0}
+devices:
+  - {id: drive, bus: rs485, unit: 2, mapping: p2_vfd, %s}
+"""
+
+
+def test_a_device_password_from_a_file_or_the_environment(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    secret = tmp_path / "p2"
+    secret.write_text("12345\n")
+    loaded = load_config(write(tmp_path, DRIVE % f"password_file: {secret}"))
+    assert loaded.config.devices[0].password_value() == "12345"
+    monkeypatch.setenv("P2_PW", "42")
+    loaded = load_config(write(tmp_path, DRIVE % "password_env: P2_PW"))
+    drive = loaded.config.devices[0]
+    assert drive.password_value() == "42"
+    dumped = json.dumps(loaded.config.model_dump(mode="json"))
+    assert "P2_PW" in dumped and '"42"' not in dumped
+    inline = load_config(write(tmp_path, DRIVE % "password: '777'")).config
+    assert "777" not in json.dumps(inline.model_dump(mode="json"))  # **********
+
+
+@pytest.mark.parametrize(
+    ("fields", "expected"),
+    [
+        ("password: '1', password_env: P", "devices.drive: give one of password"),
+        ("password_file: /nonexistent/pw", "devices.drive.password_file: no such file"),
+        ("password_env: NOT_SET_ANYWHERE", "devices.drive.password_env: environment variable"),
+        ("password: 'secret'", "devices.drive.password: the password must be a number"),
+        ("password: '70000'", "devices.drive.password: the password must be a number"),
+    ],
+)
+def test_device_password_errors_never_show_it(tmp_path: Path, fields: str, expected: str) -> None:
+    rows = issues(tmp_path, DRIVE % fields)
+    assert any(row.startswith(expected) for row in rows), rows
+    assert not any("secret" in row or "70000" in row for row in rows), rows
+
+
+def test_a_password_needs_a_mapping_that_unlocks(tmp_path: Path) -> None:
+    rows = issues(tmp_path, BASE.replace("mapping: t1.yaml", "mapping: t1.yaml, password: '1'"))
+    assert rows == ("devices.pump.password: the mapping t1.yaml has no password unlock",)
