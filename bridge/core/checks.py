@@ -138,6 +138,7 @@ def _references(mapping: Mapping) -> Iterator[str]:
         "max_from": ("number", "a number entity"),
     }
     for key, e in entities.items():
+        yield from _toggle_and_requires(mapping, key, e)
         for field_name, (kind, description) in wants.items():
             ref = getattr(e, field_name)
             if ref is None:
@@ -151,6 +152,31 @@ def _references(mapping: Mapping) -> Iterator[str]:
                 yield f"entities.{key}.{field_name}: {ref!r} must be readable"
             elif not _implies(e.when, target.when, mapping):
                 yield f"entities.{key}.{field_name}: {ref!r} is missing for some option values"
+
+
+def _toggle_and_requires(mapping: Mapping, key: str, e: Entity) -> Iterator[str]:
+    """``toggle_of`` names a readable boolean; ``requires`` readable entities, each with
+    values of its kind (booleans for a boolean, labels for an enum)."""
+    entities = mapping.entities
+    if e.toggle_of is not None:
+        target = entities.get(e.toggle_of)
+        if target is None or target.kind != "bool" or not target.readable:
+            yield f"entities.{key}.toggle_of: {e.toggle_of!r} must be a readable boolean"
+        elif not _implies(e.when, target.when, mapping):
+            yield f"entities.{key}.toggle_of: {e.toggle_of!r} is missing for some option values"
+    for ref, wanted in e.requires.items():
+        target = entities.get(ref)
+        values = wanted if isinstance(wanted, list) else [wanted]
+        if target is None or not target.readable:
+            yield f"entities.{key}.requires: {ref!r} must be a readable entity"
+        elif not _implies(e.when, target.when, mapping):
+            yield f"entities.{key}.requires: {ref!r} is missing for some option values"
+        elif target.kind == "bool" and not all(isinstance(v, bool) for v in values):
+            yield f"entities.{key}.requires.{ref}: a boolean entity takes true or false"
+        elif target.kind == "enum" and not set(values) <= set((target.enum or {}).values()):
+            yield f"entities.{key}.requires.{ref}: not one of {ref!r}'s labels"
+        elif target.kind not in ("bool", "enum"):
+            yield f"entities.{key}.requires: {ref!r} must be a boolean or an enum"
 
 
 def _is_kind(entity: Entity, kind: str) -> bool:

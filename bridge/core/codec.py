@@ -243,6 +243,8 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
     entity = point.entity
     if not entity.writable:
         raise ValueRejectedError(f"{point.key} is read-only")
+    if point.state_source is not None:
+        return _toggle_writes(point, point.state_source, value, image)
     if entity.press is not None:
         value = _press_value(point.key, entity.press, value)
     kind = entity.data_type
@@ -395,6 +397,17 @@ def _ordered(entity: Entity, unsigned: int) -> tuple[int, ...]:
 def _register_write(point: Point, words: tuple[int, ...]) -> Write:
     function = point.write_function or (6 if len(words) == 1 else 16)
     return Write(function, point.table, point.write_address, words)
+
+
+def _toggle_writes(point: Point, state: Point, value: object, image: Image) -> tuple[Write, ...]:
+    """A toggle (``toggle_of``): the ON word when the state read (``state``) differs from
+    the one asked for, else nothing (a second toggle would undo the first)."""
+    wanted = parse_bool(point.key, value)
+    if bool(decode(state, image)) == wanted:
+        return ()
+    if (point.write_function or 5) == 15:
+        return (Write(15, Table.COIL, point.write_address, (1,)),)
+    return (Write(5, Table.COIL, point.write_address, (point.coil_on_value,)),)
 
 
 def _coil_writes(point: Point, raw: int) -> tuple[Write, ...]:

@@ -251,6 +251,8 @@ def _command(key: str, entity: Entity, context: ComponentContext) -> Config:
     config: Config = {"command_topic": context.topics.set(context.device_id, key)}
     if entity.readable:
         config |= _state(key, context)
+    elif entity.toggle_of is not None:  # a toggle shows the state it flips
+        config |= _state(entity.toggle_of, context)
     return config
 
 
@@ -316,7 +318,7 @@ def _switch(key: str, entity: Entity, context: ComponentContext) -> Config:
         "payload_on": COMMAND_ON,
         "payload_off": COMMAND_OFF,
     }
-    if entity.readable:
+    if entity.readable or entity.toggle_of is not None:
         config |= {"state_on": STATE_TRUE, "state_off": STATE_FALSE}
     if entity.ha.device_class in SWITCH_CLASSES:
         config["device_class"] = entity.ha.device_class

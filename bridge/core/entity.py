@@ -17,6 +17,7 @@ from typing import Any, Self
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from bridge.core.address import PrintedAddress
+from bridge.core.duration import Duration
 
 
 class Table(StrEnum):
@@ -187,6 +188,19 @@ class Entity(BaseModel):
     pulse: bool = Field(False, description="write the bit 1 then 0 (rising-edge commands)")
     verify: bool = Field(True, description="read back after a write")
     idempotent: bool = Field(True, description="false: never retried after a timeout (toggles)")
+    toggle_of: str | None = Field(
+        None,
+        description="a write-only coil that toggles the state of this boolean entity: a "
+        "switch whose ON/OFF is sent (as the ON word) only when the state read differs",
+    )
+    write_interval: Duration | None = Field(
+        None, description="least time between two writes (a toggle is never sent twice within)"
+    )
+    requires: dict[str, bool | str | list[str]] = Field(
+        default_factory=dict,
+        description="entity key -> the value(s) it must read for a write to be sent "
+        "(a controller in the mode that accepts remote commands)",
+    )
     eeprom: bool = Field(False, description="non-volatile: skip unchanged writes, rate limit")
     dangerous: bool = Field(False, description="write only when the config allows it")
     dangerous_below: float | None = Field(
@@ -406,6 +420,12 @@ def _check_write(e: Entity) -> str | None:
         return "on_when derives a read-only boolean"
     if e.access is Access.WRITE and e.alarm:
         return "a write-only entity cannot be an alarm"
+    if (e.requires or e.write_interval is not None) and not e.writable:
+        return "requires/write_interval describe writes; the entity is read-only"
+    if e.toggle_of is not None and (
+        e.table is not Table.COIL or e.access is not Access.WRITE or e.press is not None or e.pulse
+    ):
+        return "toggle_of is for a write-only coil that is not a button (a switch)"
     return _check_dangerous_below(e)
 
 

@@ -116,6 +116,7 @@ class Mapping(BaseModel):
                 unit_source=plain.get(e.unit_from or ""),
                 min_source=plain.get(e.min_from or ""),
                 max_source=plain.get(e.max_from or ""),
+                state_source=plain.get(e.toggle_of or ""),
             )
         return resolved
 
@@ -134,6 +135,7 @@ class Point:
     unit_source: Point | None = field(default=None, repr=False)
     min_source: Point | None = field(default=None, repr=False)
     max_source: Point | None = field(default=None, repr=False)
+    state_source: Point | None = field(default=None, repr=False)  # what a toggle flips
 
     @property
     def table(self) -> Table:

@@ -70,6 +70,7 @@ class Quirks:
     exception_code: int | None = None  # answer every request with this code
     coil_on_value: int | None = None  # None: protocol.coil_on_value
     latency: float = 0.0  # seconds added before every answer
+    write_latency: float = 0.0  # seconds added before answering a write (on top of latency)
     dead: bool = False  # no answer at all
     two_byte_count: bool = False  # RTU FC03 replies carry a 2-byte byte count (P2 F9.05 = 0)
     password: int | None = None  # locked (protocol.unlock) until this is written to unlock
@@ -293,6 +294,15 @@ class Rules:
     coil_on_value: int
     fixed_limit: bool  # a quirk set the read limit: segments' own limits do not apply
     failing_writes: frozenset[int] = frozenset()  # holding writes answered "device failure"
+    toggles: tuple[tuple[int, Cell], ...] = ()  # toggle coil -> the state cell an ON flips
+
+    def toggled(self, write: Write, image: Image) -> dict[Cell, int]:
+        """What a toggle write changes (``toggle_of``: the breaker closes or opens)."""
+        if write.table is not Table.COIL or not write.values or write.values[0] == 0:
+            return {}
+        return {
+            cell: 1 - image.get(cell, 0) for coil, cell in self.toggles if coil == write.address
+        }
 
     def check_read(self, table: Table, address: int, count: int) -> int | None:
         last = address + count - 1
@@ -379,6 +389,11 @@ def build_rules(mapping: Mapping, points: AnyMapping[str, Point], quirks: Quirks
         coil_on_value=on_value,
         fixed_limit=quirks.max_read_registers is not None,
         failing_writes=quirks.failing_writes,
+        toggles=tuple(
+            (p.write_address, (p.state_source.table, p.state_source.address))
+            for p in writers
+            if p.state_source is not None
+        ),
     )
 
 

@@ -174,8 +174,9 @@ class _Device:
         if values is None and function_code in (5, 6, 15, 16):
             self._fill(table, start, address, count, registers)  # the echo after FC06
             return None
-        if self.quirks.latency > 0:
-            await asyncio.sleep(self.quirks.latency)
+        delay = self.quirks.latency + (self.quirks.write_latency if values is not None else 0)
+        if delay > 0:
+            await asyncio.sleep(delay)
         locked = self._locked(function_code, address, values)
         if values is None:
             size = _BIT_COUNT.get() if table.is_bits else count
@@ -194,6 +195,7 @@ class _Device:
                 if not (table is Table.COIL and address in self.rules.commands):
                     self.image |= stored_cells(write)
                     self._take_password(write)
+                self.image |= self.rules.toggled(write, self.image)
                 self.image |= follow(self.behaviour, write, self.image)  # start, stop, reset
         return None if code is None else ExcCodes(code)
 

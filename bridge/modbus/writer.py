@@ -47,6 +47,7 @@ class WriteCounters:
     failed: int = 0
     expired: int = 0
     last_write: dict[int, float] = field(default_factory=dict)
+    last_attempt: dict[int, float] = field(default_factory=dict)  # write_interval entities
 
 
 class DeviceWriter:
@@ -86,11 +87,13 @@ class DeviceWriter:
         self, items: dict[str, object], deadline: float | None
     ) -> dict[str, Value]:
         points = self._allowed(items)
-        await self._refresh(list(dict.fromkeys(r for p in points for r in _dependencies(p))))
+        needed = [r for p in points for r in _dependencies(p, self._required(p))]
+        await self._refresh(list(dict.fromkeys(needed)))
+        self._check_requirements(points)
         plan = self._encode_all(points, items)
         held = {p.key: self._held(p) for p in points if p.key not in plan}
         if not plan:
-            return held  # every key unchanged (EEPROM): nothing to write
+            return held  # every key unchanged (EEPROM, a toggle in place): nothing to write
         writes = _one_frame_per_word(plan, {p.key for p in points if p.entity.pulse})
         retries = self.poller.retries if all(p.entity.idempotent for p in points) else 0
         request: Write | WriteSequence = (
@@ -98,6 +101,9 @@ class DeviceWriter:
             if len(writes) == 1
             else WriteSequence(tuple(writes), _undo(writes, self.poller.image))
         )
+        for point in points:  # an attempt counts: a toggle that timed out may have acted
+            if point.entity.write_interval is not None and point.key in plan:
+                self.counters.last_attempt[point.write_address] = time.monotonic()
         try:
             await self.poller.submit(request, Priority.WRITE, retries=retries, deadline=deadline)
         except PartialWriteError as partial:
@@ -147,11 +153,14 @@ class DeviceWriter:
             try:
                 writes = encode(point, items[point.key], after)
                 self._check_unguarded(point, writes, after)
-                if entity.eeprom and entity.readable and _unchanged(point, writes, after):
-                    self.counters.skipped_unchanged += 1  # no wear, no refusal
+                if not writes or (
+                    entity.eeprom and entity.readable and _unchanged(point, writes, after)
+                ):
+                    self.counters.skipped_unchanged += 1  # no wear, no second toggle
                     continue
                 if entity.eeprom:
                     self._check_eeprom_rate(point)
+                self._check_write_interval(point)
             except ValueRejectedError as exc:
                 refused[point.key] = str(exc)
                 continue
@@ -162,8 +171,47 @@ class DeviceWriter:
             raise CommandRejectedError(refused, list(items))
         return plan
 
+    def _required(self, point: Point) -> list[Point]:
+        """The points a write of ``point`` requires a value of (``requires``)."""
+        return [self.poller.points[k] for k in point.entity.requires if k in self.poller.points]
+
+    def _check_requirements(self, points: list[Point]) -> None:
+        """Every key whose ``requires`` do not hold now (read fresh) is refused with the
+        reason; one refused key refuses the command."""
+        refused: dict[str, str] = {}
+        for point in points:
+            for required in self._required(point):
+                wanted = point.entity.requires[required.key]
+                allowed = wanted if isinstance(wanted, list) else [wanted]
+                value = decode(required, self.poller.image)
+                if value not in allowed:
+                    refused[point.key] = (
+                        f"{point.key} refused: {required.entity.name} ({required.key}) reads "
+                        f"{_word(value)}, needs {' or '.join(_word(v) for v in allowed)}: the "
+                        "device does not accept this command now"
+                    )
+                    break
+        if refused:
+            raise CommandRejectedError(refused, [p.key for p in points])
+
+    def _check_write_interval(self, point: Point) -> None:
+        """A toggle is never sent twice within its ``write_interval`` (attempts count)."""
+        interval = point.entity.write_interval
+        last = self.counters.last_attempt.get(point.write_address)
+        if interval is None or last is None:
+            return
+        waited = time.monotonic() - last
+        if waited < interval:
+            raise ValueRejectedError(
+                f"{point.key} was sent {waited:.1f} s ago: not again within {interval:g} s "
+                "(the device may still be acting on it)"
+            )
+
     def _held(self, point: Point) -> Value:
-        """The value the device holds as last read (an unchanged EEPROM parameter)."""
+        """The value the device holds as last read (an unchanged EEPROM parameter, a
+        toggle whose state is already the one asked for)."""
+        if point.state_source is not None:
+            return self.poller.values.get(point.state_source.key)
         if point.key in self.poller.values:
             return self.poller.values[point.key]
         try:
@@ -172,6 +220,8 @@ class DeviceWriter:
             return None
 
     async def _written_value(self, point: Point, value: object) -> Value:
+        if point.state_source is not None:  # a toggle: the state it flips, as read now
+            return await self._read_back(point.state_source)
         if point.entity.verify and point.entity.readable:
             return await self._read_back(point)
         return _as_value(value) if point.entity.press is None else None
@@ -268,11 +318,13 @@ class DeviceWriter:
         return self.poller.values.get(point.key)
 
 
-def _dependencies(point: Point) -> list[Read]:
+def _dependencies(point: Point, required: list[Point]) -> list[Read]:
     """What a write of ``point`` must read fresh first: the word of a bit field (even of a
-    write-only bit), a sign register, limit registers, an EEPROM parameter's current value."""
+    write-only bit), a sign register, limit registers, an EEPROM parameter's current value,
+    the state a toggle flips, the values it ``requires``."""
     entity = point.entity
-    sources = [p for p in (point.sign, point.min_source, point.max_source) if p is not None]
+    linked = (point.sign, point.min_source, point.max_source, point.state_source)
+    sources = [p for p in linked if p is not None] + required
     reads = [Read(p.table, p.address, p.count) for p in sources]
     if entity.field_width is not None or (entity.eeprom and entity.readable):
         reads.append(Read(point.table, point.address, point.count))
@@ -334,6 +386,13 @@ def _undo(writes: list[Write], image: dict[Address, int]) -> tuple[Write | None,
             undo.append(Write(write.function, write.table, write.address, old))
         before |= _stored(write)
     return tuple(undo)
+
+
+def _word(value: object) -> str:
+    """A value as a refusal names it: on/off for booleans."""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return str(value)
 
 
 def _as_value(value: object) -> Value:

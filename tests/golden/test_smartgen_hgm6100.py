@@ -112,15 +112,20 @@ COMMANDS = [
     ("test", "command_test", "01 05 00 02 00 FF 2C 4A", "01 05 00 02 FF 00 2D FA"),
     ("auto", "command_auto", "01 05 00 03 00 FF 7D 8A", "01 05 00 03 FF 00 7C 3A"),
     ("manual", "command_manual", "01 05 00 04 00 FF CC 4B", "01 05 00 04 FF 00 CD FB"),
+]
+BREAKERS = [
+    # (id, key, state key, 0x00FF frame, 0xFF00 frame)
     (
         "gen_breaker_toggle",
-        "command_generator_breaker",
+        "generator_breaker",
+        "generator_on_load",
         "01 05 00 05 00 FF 9D 8B",
         "01 05 00 05 FF 00 9C 3B",
     ),
     (
         "mains_breaker_toggle",
-        "command_mains_breaker",
+        "mains_breaker",
+        "mains_on_load",
         "01 05 00 06 00 FF 6D 8B",
         "01 05 00 06 FF 00 6C 3B",
     ),
@@ -153,30 +158,61 @@ def test_fc05_hgm6110_commands(key: str, frame: str) -> None:
     assert press_frame(HGM6110_POINTS, key) == hexbytes(frame)
 
 
-@pytest.mark.parametrize(
-    ("key", "frame"),
-    [
-        ("command_auto", "00 05 00 03 FF 00 7D EB"),
-        ("command_mains_breaker", "00 05 00 06 FF 00 6D EA"),
-    ],
-    ids=["cloud_auto_slave0", "cloud_mains_breaker_slave0"],
-)
-def test_smartgen_cloud_frames_with_ff00(key: str, frame: str) -> None:
+def test_smartgen_cloud_frames_with_ff00() -> None:
     """[S1]: SmartGen's module sends the standard ON value to unit 0 (module-side convention)."""
-    assert press_frame(STANDARD_POINTS, key, unit=0) == hexbytes(frame)
+    assert press_frame(STANDARD_POINTS, "command_auto", unit=0) == hexbytes(
+        "00 05 00 03 FF 00 7D EB"
+    )
+    closed = {(Table.COIL, 6): 0}  # mains_on_load: open, the cloud closes it
+    (write,) = encode(STANDARD_POINTS["mains_breaker"], "ON", closed)
+    assert build_frame(write, 0) == hexbytes("00 05 00 06 FF 00 6D EA")
+
+
+@pytest.mark.parametrize(
+    ("key", "state", "printed_on", "standard_on"),
+    [b[1:] for b in BREAKERS],
+    ids=[b[0] for b in BREAKERS],
+)
+def test_a_breaker_is_a_switch_that_toggles_only_when_its_state_differs(
+    key: str, state: str, printed_on: str, standard_on: str
+) -> None:
+    """Seed Tbl 10 rows 0005/0006 (HGM6120) are close/open toggles: ON closes an open
+    breaker with one FC05 (the ON word), ON on a closed one sends nothing; likewise OFF."""
+    point = POINTS[key]
+    source = POINTS[state]
+    assert point.state_source is not None and point.state_source.key == state
+    assert point.entity.component.value == "switch"
+    for value, held, frame in (("ON", 0, printed_on), ("OFF", 1, printed_on)):
+        image = {(Table.COIL, source.address): held}
+        (write,) = encode(point, value, image)
+        assert build_frame(write, 1) == hexbytes(frame)
+        (standard,) = encode(STANDARD_POINTS[key], value, image)
+        assert build_frame(standard, 1) == hexbytes(standard_on)
+        assert encode(point, value, {(Table.COIL, source.address): 1 - held}) == ()
 
 
 def test_breaker_toggles_are_guarded() -> None:
-    gen, mains = POINTS["command_generator_breaker"], POINTS["command_mains_breaker"]
-    assert not gen.entity.idempotent
-    assert not mains.entity.idempotent
-    assert gen.entity.dangerous
-    assert mains.entity.dangerous
+    gen, mains = POINTS["generator_breaker"], POINTS["mains_breaker"]
+    for point in (gen, mains):
+        assert not point.entity.idempotent
+        assert point.entity.dangerous
+        assert point.entity.write_interval == 2.0
+        assert point.entity.requires == {"remote_lock": False, "manual_mode": True}
     guard = Guard.of(POINTS.values())
     for coil in (5, 6):  # seed Tbl 10: 0005 generator, 0006 mains close/open (HGM6120)
         assert guard.dangerous_in(Table.COIL, coil, (0x00FF,)) == [coil]
-    assert "command_mains_breaker" not in HGM6110_POINTS
+    assert "mains_breaker" not in HGM6110_POINTS
     assert "command_hgm6110_5" not in POINTS
+
+
+def test_every_remote_command_requires_remote_control_not_locked() -> None:
+    """Doc §9.6: with FC01 0004 (remote lock) at 1 commands are echoed, not executed."""
+    for options in ({}, {"model": "hgm6110"}):
+        writable = [p for p in MAPPING.points(options).values() if p.entity.writable]
+        assert len(writable) == 7
+        for point in writable:
+            assert point.entity.requires.get("remote_lock") is False, point.key
+    assert POINTS["command_start"].entity.requires["manual_mode"] is True  # acts in manual
 
 
 # --- §10 computed frames: block reads ------------------------------------------------------
@@ -282,7 +318,7 @@ def _combinations() -> list[dict[str, str]]:
 def test_every_option_combination_resolves_and_presses(options: dict[str, str]) -> None:
     points = MAPPING.points(options)
     buttons = [p for p in points.values() if p.entity.press is not None]
-    assert len(buttons) == 7
+    assert len(buttons) == (5 if options["model"] == "hgm6120" else 7)
     for point in buttons:
         (write,) = encode(point, "PRESS", {})
         assert write.function == 5

@@ -343,6 +343,11 @@ def pick_writes(poller: Any) -> dict[str, tuple[str, object]]:
         kind = entity.component.value
         if kind in chosen or not entity.writable or entity.dangerous or entity.secret:
             continue
+        if any(  # a command the device does not accept in its present mode
+            poller.values.get(k) not in (v if isinstance(v, list) else [v])
+            for k, v in entity.requires.items()
+        ):
+            continue
         current = poller.values.get(key)
         if kind == "button":
             chosen[kind] = (key, "PRESS")

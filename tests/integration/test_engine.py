@@ -194,7 +194,8 @@ async def test_smartgen_commands_use_the_manual_s_on_word() -> None:
 
 @pytest.mark.asyncio
 async def test_a_toggle_is_never_resent_after_a_timeout() -> None:
-    sim = simulator((1, "smartgen_hgm6100"), latency=0.4)  # answers after the bridge gave up
+    sim = simulator((1, "smartgen_hgm6100"))
+    sim.set_value(1, "manual_mode", True)
     async with serving_tcp(sim) as port:
         engine = Engine(
             config(
@@ -203,8 +204,9 @@ async def test_a_toggle_is_never_resent_after_a_timeout() -> None:
             )
         )
         async with running(engine, pollers=False):
+            sim.set_quirks(1, Quirks(write_latency=0.4))  # answers after the bridge gave up
             with pytest.raises(DeviceTimeoutError):
-                await engine.write("smartgen_hgm6100_1", "command_generator_breaker", "PRESS")
+                await engine.write("smartgen_hgm6100_1", "generator_breaker", "ON")
             with pytest.raises(DeviceTimeoutError):
                 await engine.write("smartgen_hgm6100_1", "command_auto", "PRESS")
             await asyncio.sleep(0.5)

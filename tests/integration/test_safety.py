@@ -94,7 +94,7 @@ async def raw_client(broker: Broker, version: str = "5") -> AsyncIterator[aiomqt
 
 RETAINED_COMMANDS = [
     ("modbus/vacon_nx/run/set", "ON"),
-    ("modbus/smartgen_hgm6100/command_generator_breaker/set", "PRESS"),
+    ("modbus/smartgen_hgm6100/generator_breaker/set", "ON"),
     ("modbus/smartgen_hgm6100/set", '{"command_start": "PRESS"}'),
     ("modbus/soft_starter/motor_run/set", "ON"),
     ("modbus/bridge/request/device/write", '{"device": "p2_vfd", "address": 4096, "values": [1]}'),
@@ -143,7 +143,7 @@ NOT_PRESSES = [
     ("modbus/smartgen_hgm6100/command_start/set", "OFF"),
     ("modbus/smartgen_hgm6100/command_start/set", "false"),
     ("modbus/smartgen_hgm6100/command_start/set", "0"),
-    ("modbus/smartgen_hgm6100/command_generator_breaker/set", "toggle"),
+    ("modbus/smartgen_hgm6100/generator_breaker/set", "toggle"),
     ("modbus/smartgen_hgm6100/set", '{"command_start": false}'),
     ("modbus/smartgen_hgm6100/set", '{"command_auto": "ON"}'),
     ("modbus/vacon_nx/fault_reset/set", "0"),

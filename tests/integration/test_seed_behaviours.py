@@ -277,3 +277,65 @@ async def test_a_locked_p2_without_a_password_says_what_to_configure(
         await eventually(lambda: observer.retained.get("modbus/p2_vfd/availability") == b"offline")
     assert password_writes(sim) == []
     assert "set devices.p2_vfd.password_env or devices.p2_vfd.password_file" in caplog.text
+
+
+# --- item 9: the Smartgen breakers are switches with a desired state -----------------------
+
+GEN_TOGGLE, GEN_ON_LOAD = 5, 7  # FC05 0005 close/open, FC01 0007 generator on load
+
+
+def smartgen_device(**fields: Any) -> dict[str, Any]:
+    return device(
+        "smartgen_hgm6100",
+        protocol={"min_request_interval": 0.05},
+        allow_dangerous_writes=True,
+        **fields,
+    )
+
+
+@pytest.mark.asyncio
+async def test_a_breaker_switch_toggles_only_towards_the_state_asked_for(
+    mosquitto: Broker,
+) -> None:
+    """Refused with the reason outside manual mode and while remote control is locked; in
+    manual mode ON sends one toggle and the breaker closes, ON again sends nothing, OFF right
+    after is refused (never twice within 2 s), OFF later opens it with one toggle."""
+    sim = simulator((1, "smartgen_hgm6100"))
+    topic = "modbus/smartgen_hgm6100/generator_breaker/set"
+    async with (
+        observing(mosquitto, "modbus/#", "homeassistant/#") as observer,
+        bridged(mosquitto, sim, [smartgen_device()]),
+    ):
+        await online(observer, "smartgen_hgm6100")
+        cmps = observer.json("homeassistant/device/smartgen_hgm6100/config")["cmps"]
+        assert cmps["generator_breaker"]["platform"] == "switch"
+        assert cmps["generator_breaker"]["value_template"] == "{{ value_json.generator_on_load }}"
+        await observer.client.publish(topic, "ON")
+        await eventually(lambda: errors(observer, "smartgen_hgm6100"))
+        [refused] = errors(observer, "smartgen_hgm6100")
+        assert "Manual mode (manual_mode) reads off, needs on" in refused["error"], refused
+        sim.set_value(1, "manual_mode", True)
+        sim.set_value(1, "remote_lock", True)
+        await observer.client.publish(topic, "ON")
+        await eventually(lambda: len(errors(observer, "smartgen_hgm6100")) == 2)
+        assert (
+            "(remote_lock) reads on, needs off" in errors(observer, "smartgen_hgm6100")[1]["error"]
+        )
+        assert writes_to(sim, 1) == []
+        sim.set_value(1, "remote_lock", False)
+        await observer.client.publish(topic, "ON")
+        await eventually(lambda: writes_to(sim, 1))
+        await eventually(lambda: observer.json("modbus/smartgen_hgm6100")["generator_on_load"])
+        seen = len(observer.log)
+        await observer.client.publish(topic, "ON")  # already closed: nothing to send
+        await observer.client.publish(topic, "OFF")  # within 2 s of the toggle: refused
+        await eventually(lambda: errors(observer, "smartgen_hgm6100", seen))
+        [early] = errors(observer, "smartgen_hgm6100", seen)
+        assert early["value"] == "OFF" and "not again within 2 s" in early["error"], early
+        assert [(w.address, w.values) for w in writes_to(sim, 1)] == [(GEN_TOGGLE, (0x00FF,))]
+        await asyncio.sleep(2.0)
+        await observer.client.publish(topic, "OFF")
+        await eventually(lambda: len(writes_to(sim, 1)) == 2)
+        await eventually(lambda: not observer.json("modbus/smartgen_hgm6100")["generator_on_load"])
+        assert sim.image(1)[(Table.COIL, GEN_ON_LOAD)] == 0
+        assert len(errors(observer, "smartgen_hgm6100", seen)) == 1

@@ -148,6 +148,11 @@ def check_writes(point: Point, value: object, image: Image, writes: Iterable[Wri
         spanned = {(write.table, write.address + i) for i in range(len(write.values))}
         assert spanned <= targets, f"{point.key}: {write} outside {sorted(targets)}"
         after |= stored_cells(write)
+    if point.state_source is not None:  # a toggle: the ON word, only towards the other state
+        state = bool(decode(point.state_source, image))
+        assert bool(writes) == (state != parse_bool(point.key, value)), (point.key, value)
+        assert all(w.values == (point.coil_on_value,) for w in writes), writes
+        return
     if entity.press is not None or entity.pulse:
         return  # a command word: the words are checked above, the value is the press value
     held = decode(at_write_address(point), after)

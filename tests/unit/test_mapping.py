@@ -183,6 +183,10 @@ def test_fc16_only_device_writes_single_registers_with_16() -> None:
         ({"access": "rw", "bit": 0, "width": 4, "dangerous_below": 1}, "a whole u16 or s16"),
         ({"access": "rw", "scale": -1, "dangerous_below": 0}, "a positive scale"),
         ({"access": "rw", "byte_order": "little", "dangerous_below": 0}, "a positive scale"),
+        ({"requires": {"x": True}}, "requires/write_interval describe writes"),
+        ({"write_interval": "2s"}, "requires/write_interval describe writes"),
+        ({"toggle_of": "x", "access": "rw"}, "toggle_of is for a write-only coil"),
+        ({"toggle_of": "x", "table": "coil", "access": "w", "press": True}, "not a button"),
     ],
 )
 def test_field_errors_name_entity_and_field(fields: dict, message: str) -> None:
@@ -267,6 +271,34 @@ def test_references_must_exist_and_have_the_right_kind() -> None:
     assert "entities.b.sign_from: 'a' must be a 1-bit field of a register" in rows
     assert "entities.c.max_from: 'e' must be a number entity" in rows
     assert "entities.d.unit_from: 'a' must be an enum entity" in rows
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"toggle_of": "nothing"}, "toggle_of: 'nothing' must be a readable boolean"),
+        ({"toggle_of": "level"}, "toggle_of: 'level' must be a readable boolean"),
+        ({"requires": {"nothing": True}}, "requires: 'nothing' must be a readable entity"),
+        ({"requires": {"locked": "yes"}}, "requires.locked: a boolean entity takes true or"),
+        ({"requires": {"mode": "turbo"}}, "requires.mode: not one of 'mode''s labels"),
+        ({"requires": {"level": 3}}, "Input should be"),
+    ],
+)
+def test_toggles_and_requirements_name_readable_states(fields: dict, message: str) -> None:
+    entities = {
+        "breaker": {"name": "Breaker", "address": 5, "table": "coil", "access": "w"} | fields,
+        "closed": {"name": "Closed", "address": 7, "table": "coil"},
+        "locked": {"name": "Locked", "address": 4, "table": "coil"},
+        "mode": {"name": "Mode", "address": 1, "enum": {0: "auto", 1: "manual"}},
+        "level": {"name": "Level", "address": 2},
+    }
+    rows = errors_of(entities)
+    assert any(message in row for row in rows), rows
+    fine = entities | {
+        "breaker": entities["breaker"]
+        | {"toggle_of": "closed", "requires": {"locked": False, "mode": ["manual"]}}
+    }
+    assert make_mapping(fine).points()["breaker"].state_source is not None
 
 
 def test_status_must_name_an_entity() -> None:
