@@ -74,6 +74,8 @@ class Quirks:
     dead: bool = False  # no answer at all
     two_byte_count: bool = False  # RTU FC03 replies carry a 2-byte byte count (P2 F9.05 = 0)
     password: int | None = None  # locked (protocol.unlock) until this is written to unlock
+    count_on_read: int | None = None  # counters count one step after each read of this
+    # holding address (a counter that rolls over between the reads of its two words)
 
 
 # --- storing values -------------------------------------------------------------------

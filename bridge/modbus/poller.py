@@ -37,6 +37,7 @@ from bridge.errors import (
     ModbusError,
 )
 from bridge.modbus.scheduler import BusScheduler, Priority
+from bridge.modbus.tear_check import check_torn
 from bridge.modbus.unlock import Unlocker
 from bridge.modbus.writer import DeviceWriter, WriteCounters
 
@@ -158,10 +159,12 @@ class DevicePoller:
         chosen = set(classes)
         self._recheck_refusals()
         fresh: set[Address] = set()
-        await self._read_pass(self._plan(chosen), Priority.POLL, fresh, stop=True)
+        plan = self._plan(chosen)
+        await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
         keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
+        await check_torn(self, keys, plan, fresh)
         self.publish(keys, fresh)
         if not self.first_poll_done and set(PollClass) <= chosen:
             self.first_poll_done = True  # units and limits read (or not there): say so once
@@ -171,8 +174,9 @@ class DevicePoller:
         """Read these points (all when None) ahead of the polls; return their values."""
         wanted = [self.points[k] for k in keys] if keys is not None else list(self.points.values())
         fresh: set[Address] = set()
-        limits = self.limits()
-        await self._read_pass(plan_reads(wanted, limits).reads, Priority.READ_NOW, fresh)
+        reads = plan_reads(wanted, self.limits()).reads
+        await self._read_pass(reads, Priority.READ_NOW, fresh)
+        await check_torn(self, [p.key for p in wanted], reads, fresh)
         self.publish([p.key for p in wanted], fresh)
         return {p.key: self.values.get(p.key) for p in wanted}
 

@@ -187,6 +187,7 @@ class _Device:
             )
             if code is None:
                 self._fill(table, start, address, count, registers)
+                self._count_on_read(table, address, count)
         else:
             write = Write(function_code, table, address, tuple(int(v) for v in values))
             self.record(self.unit, write, received)
@@ -205,6 +206,18 @@ class _Device:
             return self.movers
         still = {point.key for point in self.behaviour.motion}
         return tuple(mover for mover in self.movers if mover.point.key not in still)
+
+    def _count_on_read(self, table: Table, address: int, count: int) -> None:
+        """``Quirks.count_on_read``: the counters count once this read is answered."""
+        watched = self.quirks.count_on_read
+        if (
+            watched is None
+            or table is not Table.HOLDING
+            or not address <= watched < address + count
+        ):
+            return
+        counters = tuple(m for m in self.movers if m.counter)
+        self.image |= advance(counters, self.image, random.Random(0))  # noqa: S311
 
     def _locked(self, function_code: int, address: int, values: object) -> int | None:
         """``Quirks.password``: the exception a locked unit answers (its protocol's

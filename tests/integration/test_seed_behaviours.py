@@ -19,10 +19,20 @@ import pytest
 
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
-from bridge.core.entity import Table
+from bridge.core.entity import PollClass, Table
+from bridge.modbus.engine import Engine
 from bridge.modbus.simulator import Quirks, Simulator
 from bridge.mqtt.client import MqttClient
-from tests.integration.harness import cancel, eventually, serving_tcp, simulator
+from tests.integration.harness import (
+    Recorder,
+    cancel,
+    config,
+    eventually,
+    running,
+    serving_tcp,
+    simulator,
+    tcp_bus,
+)
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import Observer, observing
 
@@ -339,3 +349,29 @@ async def test_a_breaker_switch_toggles_only_towards_the_state_asked_for(
         await eventually(lambda: not observer.json("modbus/smartgen_hgm6100")["generator_on_load"])
         assert sim.image(1)[(Table.COIL, GEN_ON_LOAD)] == 0
         assert len(errors(observer, "smartgen_hgm6100", seen)) == 1
+
+
+# --- item 10: tear-free 32-bit counters on one-register-per-read devices -------------------
+
+ELECTRIC_LIFE_HIGH = 0xAA  # Nastec idx 0xAB (high word), 0xAC (low word)
+
+
+@pytest.mark.asyncio
+async def test_a_counter_rolling_over_between_its_two_reads_is_read_again() -> None:
+    """The Nastec reads one register per request. Its power-on counter stands at 0x0000FFFF
+    and counts one second right after its high word is read, so the low word comes back as
+    0x0000: the pair read is 0 instead of 65536. The bridge reads the high word again, sees
+    it moved, reads low and high again and publishes 65537, never the torn 0."""
+    sim = simulator((1, "nastec_vasco"), count_on_read=ELECTRIC_LIFE_HIGH)
+    sim.set_value(1, "electric_life", 0xFFFF)
+    async with serving_tcp(sim) as port:
+        engine = Engine(config([tcp_bus(port)], [device("nastec_vasco")]), recorder := Recorder())
+        async with running(engine, pollers=False):
+            nastec = engine.devices["nastec_vasco"]
+            values = await nastec.read_now(["electric_life", "inverter_life"])
+            assert values["electric_life"] == 0x10001, hex(values["electric_life"] or 0)
+            assert sim.value(1, "electric_life") == 0x10002  # counted at each high read
+            published = [u.values.get("electric_life") for u in recorder.of("nastec_vasco")]
+            assert 0 not in published
+            await nastec.poll([PollClass.SLOW])
+            assert nastec.values["electric_life"] == sim.value(1, "electric_life") - 1
