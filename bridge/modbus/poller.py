@@ -28,6 +28,7 @@ from bridge.core.refusal import Refusal, refusal_search
 from bridge.core.refusal_memory import RefusalMemory, Verdict
 from bridge.core.request import Read, Write, WriteSequence
 from bridge.core.timing import LinkTiming
+from bridge.core.watchdog import Watchdog
 from bridge.errors import (
     BusError,
     DeviceExceptionError,
@@ -36,6 +37,7 @@ from bridge.errors import (
     MissingDataError,
     ModbusError,
 )
+from bridge.modbus.keepalive import keep_alive
 from bridge.modbus.scheduler import BusScheduler, Priority
 from bridge.modbus.tear_check import check_torn
 from bridge.modbus.unlock import Unlocker
@@ -88,6 +90,8 @@ class DevicePoller:
         self.health = DeviceHealth(policy)
         self.writer = DeviceWriter(self)
         self.unlocker = Unlocker(device, self.protocol)
+        keepalive = self.protocol.keepalive
+        self.watchdog = Watchdog(keepalive.interval) if keepalive is not None else None
         self.image: dict[Address, int] = {}
         self.values: dict[str, Value] = {}
         self.refusals = RefusalMemory(policy.refusal_recheck)
@@ -111,7 +115,18 @@ class DevicePoller:
         return {PollClass.FAST: fast, PollClass.SLOW: slow}
 
     async def run(self) -> None:
-        """Poll until cancelled; never raises for a device fault."""
+        """Poll until cancelled (and feed the device's watchdog, bridge/modbus/keepalive.py);
+        never raises for a device fault."""
+        async with asyncio.TaskGroup() as group:
+            if self.watchdog is not None:
+                group.create_task(keep_alive(self), name=f"keepalive:{self.device.id}")
+            await self._poll_loop()
+
+    def plan_of(self, poll_class: PollClass) -> tuple[Read, ...]:
+        """The reads of one poll class, as planned now."""
+        return self._plan({poll_class})
+
+    async def _poll_loop(self) -> None:
         next_due = dict.fromkeys((PollClass.FAST, PollClass.SLOW, PollClass.ONCE), 0.0)
         while True:
             now = time.monotonic()
@@ -413,6 +428,9 @@ class DevicePoller:
     ) -> None:
         now = time.monotonic()
         self._last_traffic = now
+        dog = self.watchdog
+        if dog is not None and outcome is not Outcome.TIMEOUT and dog.answered(now):
+            log.info("%s answers again: its watchdog is fed", self.device.id)
         first_contact = self.health.online is None
         transition = self.health.record(outcome, now, latency=latency, code=code)
         self._announce(transition, first_contact=first_contact)

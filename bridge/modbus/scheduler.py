@@ -64,8 +64,9 @@ BURST = 10.0  # seconds: unsolicited bytes this far apart are logged as separate
 
 class Priority(IntEnum):
     WRITE = 0  # commands, and the reads that are part of one (read-modify-write, read-back)
-    READ_NOW = 1  # reads on request (/get, management reads)
-    POLL = 2
+    KEEPALIVE = 1  # a device's communication watchdog must hear from the bridge in time
+    READ_NOW = 2  # reads on request (/get, management reads)
+    POLL = 3
 
 
 @dataclass(slots=True)

@@ -20,7 +20,11 @@ import pytest
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
 from bridge.core.entity import PollClass, Table
+from bridge.core.protocol import Keepalive
+from bridge.core.request import Read
+from bridge.errors import ModbusError
 from bridge.modbus.engine import Engine
+from bridge.modbus.scheduler import Priority
 from bridge.modbus.simulator import Quirks, Simulator
 from bridge.mqtt.client import MqttClient
 from tests.integration.harness import (
@@ -375,3 +379,68 @@ async def test_a_counter_rolling_over_between_its_two_reads_is_read_again() -> N
             assert 0 not in published
             await nastec.poll([PollClass.SLOW])
             assert nastec.values["electric_life"] == sim.value(1, "electric_life") - 1
+
+
+# --- item 11: watchdogs are fed even when the bus is busy ---------------------------------
+
+
+def with_keepalive(loaded: Any, device_id: str, interval: float) -> Any:
+    """The device's mapping with its watchdog interval shortened (20 s is long for a test)."""
+    mapping = loaded.mappings[device_id]
+    keepalive = Keepalive(interval=interval)
+    protocol = mapping.protocol.model_copy(update={"keepalive": keepalive})
+    loaded.mappings[device_id] = mapping.model_copy(update={"protocol": protocol})
+    return loaded
+
+
+async def hog(engine: Engine, unit: int) -> None:
+    """Commissioning on the same bus: reads on request to a unit that never answers."""
+    scheduler = engine.schedulers["tcp"]
+    while True:
+        with contextlib.suppress(ModbusError):
+            await scheduler.submit(unit, Read(H, 0, 1), timeout=0.3, priority=Priority.READ_NOW)
+
+
+@pytest.mark.asyncio
+async def test_a_soft_starter_hears_from_the_bridge_while_commissioning_holds_the_bus() -> None:
+    """Reads on request to a silent unit go before polls: without the keepalive read, the
+    soft starter would get no request at all while they last (its watchdog then stops the
+    motor). With it, the starter is read again and again, ahead of them."""
+    sim = simulator((1, "soft_starter"))
+    async with serving_tcp(sim) as port:
+        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
+        engine = Engine(with_keepalive(loaded, "soft_starter", 1.0))
+        async with running(engine):
+            starter = engine.devices["soft_starter"]
+            await eventually(lambda: starter.health.online is True)
+            hogs = [asyncio.create_task(hog(engine, 9)) for _ in range(2)]
+            try:
+                await asyncio.sleep(0.5)  # the hog's reads queue ahead of every poll
+                answered = starter.health.requests - starter.health.timeouts
+                await eventually(
+                    lambda: starter.health.requests - starter.health.timeouts >= answered + 3,
+                    timeout=15,
+                )
+            finally:
+                for task in hogs:
+                    await cancel(task)
+            assert starter.health.online is True
+
+
+@pytest.mark.asyncio
+async def test_a_watchdog_that_could_not_be_fed_is_reported_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO)
+    sim = simulator((1, "soft_starter"))
+    async with serving_tcp(sim) as port:
+        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
+        engine = Engine(with_keepalive(loaded, "soft_starter", 0.6))
+        async with running(engine):
+            starter = engine.devices["soft_starter"]
+            await eventually(lambda: starter.health.online is True)
+            sim.set_quirks(1, Quirks(dead=True))
+            await eventually(lambda: "longer than its communication watchdog" in caplog.text)
+            sim.set_quirks(1, Quirks())
+            await eventually(lambda: "its watchdog is fed" in caplog.text, timeout=15)
+    assert caplog.text.count("longer than its communication watchdog allows") == 1

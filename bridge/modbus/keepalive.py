@@ -1,0 +1,80 @@
+"""Keeping a device's communication watchdog fed (bridge/core/watchdog.py): a task beside
+the poll loop of a device whose mapping declares ``protocol.keepalive``.
+
+While the device is online, a read at ``Priority.KEEPALIVE`` (after writes, before reads on
+request, commissioning and polls) goes out once it has been silent for half its keepalive
+interval: its first poll block, whose values are published like a poll's. The log says
+once when the device went longer than the interval without an answer (its watchdog may
+stop the motor) and once when it answers again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from typing import TYPE_CHECKING
+
+from bridge.core.entity import PollClass, Table
+from bridge.modbus.scheduler import Priority
+
+if TYPE_CHECKING:
+    from bridge.modbus.poller import DevicePoller
+
+log = logging.getLogger(__name__)
+LAPSE_MARGIN = 0.01  # seconds: wake just after a silence became longer than the interval
+
+
+async def keep_alive(poller: DevicePoller) -> None:
+    """Feed the device's watchdog until cancelled; say so when it could not."""
+    dog = poller.watchdog
+    if dog is None:
+        return
+    while True:
+        now = time.monotonic()
+        _report_lapse(poller, now)
+        due = dog.due()
+        if due is not None and poller.health.online is True and now >= due:
+            await _read_once(poller)
+            continue
+        await asyncio.sleep(_next_wake(poller, now) - now)
+
+
+def _next_wake(poller: DevicePoller, now: float) -> float:
+    """The next keepalive read (while online), or the moment a silence becomes a lapse."""
+    dog = poller.watchdog
+    if dog is None or dog.last_answer is None:
+        return now + 1.0
+    wakes = [now + dog.interval / 2]
+    if poller.health.online is True and (due := dog.due()) is not None:
+        wakes.append(due)
+    if not dog.lapsed:
+        wakes.append(dog.last_answer + dog.interval + LAPSE_MARGIN)
+    return max(now + LAPSE_MARGIN, min(wakes))
+
+
+def _report_lapse(poller: DevicePoller, now: float) -> None:
+    dog = poller.watchdog
+    silence = dog.lapse(now) if dog is not None else None
+    if dog is None or silence is None:
+        return
+    log.warning(
+        "%s: no answer for %.1f s, longer than its communication watchdog allows "
+        "(keepalive %g s): the device may stop the motor",
+        poller.device.id,
+        silence,
+        dog.interval,
+        extra={"event": "watchdog_lapse", "device": poller.device.id},
+    )
+
+
+async def _read_once(poller: DevicePoller) -> None:
+    """One keepalive read: the first block the fast polls read (its values published)."""
+    plan = poller.plan_of(PollClass.FAST) or poller.plan_of(PollClass.SLOW)
+    if not plan:
+        return
+    read = plan[0]
+    fresh: set[tuple[Table, int]] = set()
+    await poller.read_block(read, Priority.KEEPALIVE, fresh)
+    keys = [k for k, p in poller.points.items() if {(p.table, a) for a in p.span} & fresh]
+    poller.publish(keys, fresh)
