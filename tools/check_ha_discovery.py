@@ -18,6 +18,15 @@ For each snapshot (default: every file in tests/golden/discovery/) it checks:
   default_entity_id, unique_id collisions, via_device naming the bridge device;
 - every value_template, rendered by HA's template engine on a sample state document,
   gives a state the component accepts (payload_on/off, an option, a number in range).
+With ``--states [PYTHON]`` it also checks each shipped mapping's states at the extremes
+(raw 0, every bit set, 0x8000, the manual's min and max; ``tests/extreme_states.py``, run
+by the bridge's Python, default ``.venv/bin/python``): every discovery payload published
+with them against the schemas, and every state as Home Assistant takes it: the component's
+value_template rendered by HA's template engine on the state document, then the state
+accepted (a number in range, an option, a number for a measurement, a payload).
+
+    /tmp/havenv/bin/python tools/check_ha_discovery.py --states .venv/bin/python
+
 Exit status 1 when anything is wrong; each problem is printed as ``file: key: message``.
 """
 
@@ -26,7 +35,9 @@ from __future__ import annotations
 import asyncio
 import importlib
 import json
+import math
 import re
+import subprocess
 import sys
 import tempfile
 from collections import Counter
@@ -162,6 +173,34 @@ class Checker:
             if message:
                 self.problem(where, f"{text} on {sample!r} renders {rendered!r}: {message}")
 
+    def check_state_case(self, case: dict[str, Any], seen: set[str]) -> None:
+        """One extreme case: its discovery payload (schemas, once per distinct payload)
+        and every component's state rendered from its state document."""
+        where = case["name"]
+        payload = json.dumps(case["discovery"], sort_keys=True)
+        if payload not in seen:
+            seen.add(payload)
+            problems = len(self.problems)
+            self.check_device_payload(where, f"{PREFIX}/device/extremes/config", case["discovery"])
+            if len(self.problems) > problems:
+                return
+            self.unique_ids.clear()
+        for key, component in case["discovery"]["cmps"].items():
+            if "value_template" not in component:
+                continue
+            config = {k: v for k, v in component.items() if k != "platform"}
+            module = importlib.import_module(
+                f"homeassistant.components.mqtt.{component['platform']}"
+            )
+            validated = module.DISCOVERY_SCHEMA(config | {"device": case["discovery"]["device"]})
+            rendered = Template(validated["value_template"].template, self.hass)
+            text = str(
+                rendered.async_render_with_possible_json_value(json.dumps(case["state"]), "")
+            )
+            message = _state_refusal(component["platform"], validated, text)
+            if message:
+                self.problem(f"{where}: {key}", f"state {text!r}: {message}")
+
     def finish(self) -> None:
         for (platform, unique_id), count in self.unique_ids.items():
             if count > 1:
@@ -220,26 +259,75 @@ def _refusal(platform: str, config: dict[str, Any], rendered: str, sample: Any) 
     return None if rendered == str(sample) else "changed on the way"
 
 
-async def main(paths: list[Path]) -> int:
+def _state_refusal(platform: str, config: dict[str, Any], text: str) -> str | None:
+    """Why Home Assistant drops this rendered state (None: it takes it). The rules are
+    those of its MQTT platforms: sensor (an enum's options, a number where a unit, state
+    or device class says so), number (min..max), select (options), binary_sensor and
+    switch (their payloads), text (max length)."""
+    if text in ("None", "") and platform != "text":
+        return None  # unknown
+    if platform == "binary_sensor":
+        return None if text in (config["payload_on"], config["payload_off"]) else "no payload"
+    if platform == "switch":
+        return None if text in (config.get("state_on"), config.get("state_off")) else "no state"
+    if config.get("options"):
+        return None if text in config["options"] else "not one of the options"
+    if platform == "number":
+        return None if config["min"] <= float(text) <= config["max"] else "out of range"
+    if platform == "text":
+        return None if len(text) <= config["max"] else "longer than max"
+    if platform == "sensor" and (
+        config.get("unit_of_measurement") or config.get("state_class") or config.get("device_class")
+    ):
+        try:
+            return None if math.isfinite(float(text)) else "not a finite number"
+        except ValueError:
+            return "not a number (HA expects a numeric state)"
+    return None
+
+
+def _extreme_cases(python: str) -> list[dict[str, Any]]:
+    """The cases of tests/extreme_states.py, computed by the bridge's own Python."""
+    root = Path(__file__).resolve().parent.parent
+    command = [python, "-m", "tests.extreme_states"]  # the bridge's Python, named by the user
+    done = subprocess.run(command, cwd=root, capture_output=True, check=True)  # noqa: S603
+    cases: list[dict[str, Any]] = json.loads(done.stdout)
+    return cases
+
+
+async def main(paths: list[Path], states: str | None = None) -> int:
     hass = HomeAssistant(tempfile.mkdtemp(prefix="check_ha_discovery"))
     checker = Checker(hass)
+    cases = _extreme_cases(states) if states is not None else []
     try:
         for path in paths:
             checker.check_file(path)
         checker.finish()
+        seen: set[str] = set()
+        for case in cases:
+            checker.check_state_case(case, seen)
     finally:
         await hass.async_stop(force=True)
     for line in checker.problems:
         print(line)
     if not KNOWS_DEFAULT_ENTITY_ID:
         print(f"note: Home Assistant {ha_version} ignores default_entity_id (added in 2025.10)")
+    extremes = f", {len(cases)} extreme state cases" if states is not None else ""
     print(
-        f"Home Assistant {ha_version}: {len(paths)} files, {checker.components} components, "
-        f"{len(checker.problems)} problems"
+        f"Home Assistant {ha_version}: {len(paths)} files, {checker.components} components"
+        f"{extremes}, {len(checker.problems)} problems"
     )
     return 1 if checker.problems else 0
 
 
 if __name__ == "__main__":
-    files = [Path(a) for a in sys.argv[1:]] or sorted(GOLDEN.glob("*.json"))
-    sys.exit(asyncio.run(main(files)))
+    arguments = sys.argv[1:]
+    python: str | None = None
+    if "--states" in arguments:
+        at = arguments.index("--states")
+        following = arguments[at + 1 : at + 2]
+        given = bool(following) and not following[0].endswith(".json")
+        python = following[0] if given else ".venv/bin/python"
+        del arguments[at : at + 1 + given]
+    files = [Path(a) for a in arguments] or sorted(GOLDEN.glob("*.json"))
+    sys.exit(asyncio.run(main(files, python)))
