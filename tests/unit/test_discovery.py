@@ -862,7 +862,8 @@ def test_the_status_component_admits_the_status_entity_s_unknown_code() -> None:
     shown = shown_readings(mapping.points(), values, image, "state")
     assert shown == {"state": "code_9", "status": "code_9"}
     cmps = _cmps(entities, mapping_status="state", readings=shown)
-    assert cmps["status"]["options"] == ["off", "on", "code_9"]
+    assert "status" not in cmps  # the status entity is published once, as itself
+    assert cmps["state"]["options"] == ["off", "on", "code_9"]
 
 
 @pytest.mark.parametrize(

@@ -493,7 +493,7 @@ entities:
   level: {name: Level, address: 2, unit_from: units}
   limit: {name: Limit, address: 3, max_from: speed}
   state: {name: State, address: 4, enum: {0: stop, 1: run}}
-  twin: {name: Twin, address: 4}
+  twin: {name: Twin, address: 4, scale: 0.1}
 """
     )
     with pytest.raises(MappingError) as caught:
