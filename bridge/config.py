@@ -182,13 +182,7 @@ class MqttConfig(_Strict):
 
     def password_value(self) -> str | None:
         """The password from whichever source is configured (read now, never logged)."""
-        if self.password is not None:
-            return self.password.get_secret_value()
-        if self.password_file is not None:
-            return self.password_file.read_text(encoding="utf-8").strip()
-        if self.password_env is not None:
-            return os.environ.get(self.password_env)
-        return None
+        return secret_of(self.password, self.password_file, self.password_env)
 
 
 class _BusBase(_Strict):
@@ -291,16 +285,10 @@ class DeviceConfig(_Strict):
     def password_value(self) -> str | None:
         """The device password from whichever source is configured (read now, never
         logged); None when none is configured or its source is gone."""
-        if self.password is not None:
-            return self.password.get_secret_value()
         try:
-            if self.password_file is not None:
-                return self.password_file.read_text(encoding="utf-8").strip()
+            return secret_of(self.password, self.password_file, self.password_env)
         except OSError:
             return None
-        if self.password_env is not None:
-            return os.environ.get(self.password_env)
-        return None
 
 
 class MetricsConfig(_Strict):
@@ -358,13 +346,8 @@ class WebConfig(_Strict):
 
     def token_value(self) -> str | None:
         """The token from whichever source is configured (read now, never logged)."""
-        if self.token is not None:
-            return self.token.get_secret_value()
-        if self.token_file is not None:
-            return self.token_file.read_text(encoding="utf-8").strip()
-        if self.token_env is not None:
-            return os.environ.get(self.token_env, "").strip()
-        return None
+        token = secret_of(self.token, self.token_file, self.token_env)
+        return None if token is None else token.strip()
 
 
 class ManagementConfig(_Strict):
@@ -587,6 +570,19 @@ def _device_password_errors(
 
 def _is_register_number(text: str | None) -> bool:
     return text is not None and text.isdigit() and int(text) <= 0xFFFF
+
+
+def secret_of(value: SecretStr | None, file: Path | None, env: str | None) -> str | None:
+    """A secret from whichever source is configured: given, a file (stripped), or an
+    environment variable (None while it is unset); read now, never logged. OSError if the
+    file cannot be read."""
+    if value is not None:
+        return value.get_secret_value()
+    if file is not None:
+        return file.read_text(encoding="utf-8").strip()
+    if env is not None:
+        return os.environ.get(env)
+    return None
 
 
 def config_schema() -> dict[str, Any]:
