@@ -244,8 +244,15 @@ class Bridge:
             for key in sorted(keys & set(published(poller.points))):
                 payload = plain_payload(poller.values.get(key))
                 burst.append((topics.value(device_id, key), payload, True))
-        # online once it answered and its values are out (not before: nothing to show yet)
-        availability = "online" if poller.health.online and poller.values else "offline"
+        # online once it answered and its values are out, offline once it stopped
+        # answering; before its first poll settled, nothing (a retained "offline" for a
+        # device that is only being asked would be a false alarm)
+        if poller.health.online is False:
+            availability = "offline"
+        elif poller.health.online and poller.values:
+            availability = "online"
+        else:
+            return False
         if self._availability.get(device_id) != availability:
             self._availability[device_id] = availability
             burst.append((topics.availability(device_id), availability, True))

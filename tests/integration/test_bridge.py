@@ -263,6 +263,29 @@ async def test_output_chooses_the_device_json_the_plain_values_or_both(
 
 
 @pytest.mark.asyncio
+async def test_availability_says_nothing_until_a_device_has_answered_or_given_up(
+    mosquitto: Broker,
+) -> None:
+    """A slow first poll is not a false "offline": the first availability a device gets is
+    "online" with its values, or "offline" once it stopped answering (the Vacon, dead)."""
+    sim = all_units()
+    sim.set_quirks(UNITS["nastec_vasco"], Quirks(latency=0.02))  # 113 reads: a slow first poll
+    sim.set_quirks(UNITS["vacon_nx"], Quirks(dead=True))
+    async with observing(mosquitto, "modbus/#") as observer, running_bridge(mosquitto, sim):
+        await eventually(
+            lambda: (
+                observer.retained.get("modbus/nastec_vasco/availability") == b"online"
+                and observer.retained.get("modbus/vacon_nx/availability") == b"offline"
+            ),
+            timeout=30,
+        )
+        pump = [m.payload for m in observer.after(0, "modbus/nastec_vasco/availability")]
+        drive = [m.payload for m in observer.after(0, "modbus/vacon_nx/availability")]
+        assert (pump, drive) == ([b"online"], [b"offline"])
+        assert "modbus/nastec_vasco" in observer.retained  # its values came with it
+
+
+@pytest.mark.asyncio
 async def test_commands_to_an_offline_device_are_refused(mosquitto: Broker) -> None:
     sim = all_units()
     sim.set_quirks(UNITS["vacon_nx"], Quirks(dead=True))
