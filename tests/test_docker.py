@@ -348,10 +348,13 @@ def modbus_tcp_pump(tmp_path: Path) -> Iterator[int]:
         stdout=log, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     try:
-        deadline = time.monotonic() + 20
-        while "serving" not in (tmp_path / "tcp-simulator.log").read_text():
-            assert simulator.poll() is None and time.monotonic() < deadline, "no simulator"
+        for _ in range(200):  # bounded: 200 looks, 0.1 s apart
+            if "serving" in (tmp_path / "tcp-simulator.log").read_text():
+                break
+            assert simulator.poll() is None, "the simulator exited"
             time.sleep(0.1)
+        else:
+            pytest.fail("the simulator never said it was serving")
         yield port
     finally:
         simulator.send_signal(signal.SIGTERM)

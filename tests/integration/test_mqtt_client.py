@@ -1,4 +1,8 @@
-"""bridge.mqtt against a real mosquitto (and a byte-level stub for what mosquitto won't do)."""
+"""bridge.mqtt against a real mosquitto, and a byte-level stub broker for what mosquitto
+won't do (answer with DUP set, never answer an MQTT 5 CONNECT like amqtt, close on it like
+RabbitMQ 3.x, die before a PUBACK). The stub plays the broker, the peer; the client under
+test is the real bridge.mqtt over a real socket. Where a test shortens the client's own
+CONNACK timeout (``_TIMEOUT``), it is to keep the test short, not to replace anything."""
 
 from __future__ import annotations
 
