@@ -6,7 +6,8 @@ first ``fast_window`` seconds of an outage it tries every ``initial`` seconds do
 to ``fast_max`` (a refused connection costs next to nothing). A longer outage backs off,
 doubling up to ``slow_max``. The backoff starts over only after a good session (one that
 lasted ``good_session`` seconds): a broker that accepts and drops the bridge at once
-(a second client with the same id, an ACL) is not hammered.
+(a second client with the same id, an ACL) is not hammered, nor is one that refuses the
+login (a wrong password does not get better by asking five times a second).
 """
 
 from __future__ import annotations
@@ -31,14 +32,16 @@ class ReconnectBackoff:
         """A session started."""
         self._connected_at = now
 
-    def failed(self, now: float) -> float:
-        """An attempt failed or a session ended: the seconds to wait before the next one."""
+    def failed(self, now: float, *, refused: bool = False) -> float:
+        """An attempt failed or a session ended: the seconds to wait before the next one.
+        ``refused``: the broker answered and said no (CONNACK): backs off like an old
+        outage."""
         if self._connected_at is not None and now - self._connected_at >= self.good_session:
             self._delay, self._outage_since = 0.0, None  # after a good session: start over
         self._connected_at = None
         if self._outage_since is None:
             self._outage_since = now
-        young = now - self._outage_since < self.fast_window
+        young = not refused and now - self._outage_since < self.fast_window
         longest = self.fast_max if young else self.slow_max
         self._delay = min(longest, self.initial if self._delay == 0 else 2 * self._delay)
         return self._delay

@@ -567,9 +567,10 @@ async def run_with_reconnect(
             if first_connect_required and not ever_connected:
                 raise failure from None
             reason = str(failure)
+            refused = isinstance(failure, MqttConnectError) and failure.code is not None
         if connected and on_state is not None:
             on_state("offline")
-        delay = backoff.failed(time.monotonic())
+        delay = backoff.failed(time.monotonic(), refused=refused)
         if outage is None:
             _log.warning(
                 "MQTT: %s; retrying every %.1f s or later",

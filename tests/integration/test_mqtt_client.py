@@ -27,7 +27,8 @@ from bridge.mqtt import (
 )
 from bridge.mqtt import client as client_module
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
-from tests.integration.mosquitto import Broker, TlsFiles
+from tests.integration.harness import eventually
+from tests.integration.mosquitto import Broker, TlsFiles, free_port
 
 STATE = "t/bridge/state"
 T = TypeVar("T")
@@ -170,6 +171,37 @@ async def test_bad_password_is_refused(mosquitto_auth: Broker, version: str) -> 
             pass
     # mosquitto 2.0 answers "not authorised" (0x87; 3.1.1 code 5), others 0x86 (code 4)
     assert refused.value.code in (0x86, 0x87)
+
+
+class RecordingBackoff(ReconnectBackoff):
+    """The real backoff, remembering how each failure was classified."""
+
+    def __init__(self) -> None:
+        super().__init__(initial=0.05)
+        self.kinds: list[bool] = []
+
+    def failed(self, now: float, *, refused: bool = False) -> float:
+        self.kinds.append(refused)
+        return super().failed(now, refused=refused)
+
+
+@pytest.mark.asyncio
+async def test_a_refused_login_backs_off_and_a_closed_port_retries_fast(
+    mosquitto_auth: Broker,
+) -> None:
+    async def session(_: MqttClient) -> None:
+        raise AssertionError("never connected")
+
+    wrong = cfg(mosquitto_auth.url, username=BROKER_USER, password="wrong")
+    closed = cfg(f"mqtt://127.0.0.1:{free_port()}")
+    for config, refused in ((wrong, True), (closed, False)):
+        backoff = RecordingBackoff()
+        loop = asyncio.ensure_future(run_with_reconnect(config, STATE, session, backoff=backoff))
+        await eventually(lambda b=backoff: len(b.kinds) >= 2, timeout=10)
+        loop.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await loop
+        assert set(backoff.kinds) == {refused}
 
 
 # -- TLS --------------------------------------------------------------------------------

@@ -45,3 +45,10 @@ def test_a_session_dropped_at_once_does_not_start_over() -> None:
     backoff.failed(70.0)  # the outage is old now
     backoff.connected(71.0)
     assert backoff.failed(71.5) == pytest.approx(1.6)
+
+
+def test_a_refused_login_is_not_retried_five_times_a_second() -> None:
+    backoff = ReconnectBackoff()
+    times = [0.0, 0.1, 0.3, 0.7, 1.5, 3.1, 6.3]
+    delays_refused = [backoff.failed(t, refused=True) for t in times]
+    assert delays_refused == pytest.approx([0.1, 0.2, 0.4, 0.8, 1.6, 3.2, 6.4])
