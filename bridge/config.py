@@ -325,8 +325,8 @@ class WebConfig(_Strict):
         given = [self.token, self.token_file, self.token_env]
         if sum(value is not None for value in given) > 1:
             raise ValueError("give one of token, token_file, token_env")
-        if self.token is not None and len(self.token.get_secret_value()) < MIN_TOKEN:
-            raise ValueError(f"token: at least {MIN_TOKEN} characters")
+        if self.token is not None and len(self.token.get_secret_value().strip()) < MIN_TOKEN:
+            raise ValueError(f"token: at least {MIN_TOKEN} characters (spaces do not count)")
         if self.enabled and not self.loopback and given == [None] * 3 and not self.ingress_proxies:
             raise ValueError(
                 f"token: the page listens beyond loopback ({self.host}): give a token "

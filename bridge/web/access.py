@@ -8,7 +8,9 @@
   SameSite=Strict, so another site's page can neither read nor send it.
 - Without a token the page listens on loopback only (the config insists) and answers
   only requests whose ``Host`` is a loopback name: a web page on another site that
-  points its own name at 127.0.0.1 (DNS rebinding) is refused.
+  points its own name at 127.0.0.1 (DNS rebinding) is refused. A page listening beyond
+  loopback without a token (only with ingress proxies) lets nobody else in, whatever
+  ``Host`` a client claims.
 
 A request that changes something (``POST``) must also come from the page itself: a JSON
 body (``Content-Type: application/json``, which another site cannot send without
@@ -26,7 +28,8 @@ from http import HTTPStatus
 from http.cookies import CookieError, SimpleCookie
 from urllib.parse import urlsplit
 
-from bridge.config import WebConfig
+from bridge.config import MIN_TOKEN, WebConfig
+from bridge.errors import ConfigError
 from bridge.web.http import Request
 
 COOKIE = "bridge_web"
@@ -43,10 +46,21 @@ class Refusal:
 class Access:
     token: str | None
     proxies: frozenset[str]
+    loopback: bool = True  # the page listens on this machine only
 
     @classmethod
     def of(cls, web: WebConfig) -> Access:
-        return cls(web.token_value() or None, frozenset(str(a) for a in web.ingress_proxies))
+        """The access rules of the page's settings; ConfigError when a token source is
+        configured but holds no usable token now (the page must not open up without one)."""
+        token = web.token_value()
+        configured = any(v is not None for v in (web.token, web.token_file, web.token_env))
+        if configured and (token is None or len(token) < MIN_TOKEN):
+            where = "bridge.web.token_file" if web.token_file is not None else "bridge.web.token"
+            raise ConfigError(
+                "web page", [f"{where}: the token is missing or shorter than {MIN_TOKEN}"]
+            )
+        proxies = frozenset(str(a) for a in web.ingress_proxies)
+        return cls(token if configured else None, proxies, web.loopback)
 
     def refusal(self, request: Request) -> Refusal | None:
         """Why ``request`` may not use the API, or None when it may."""
@@ -56,7 +70,7 @@ class Access:
             if self.has_token(request):
                 return None
             return Refusal(HTTPStatus.UNAUTHORIZED, "this page needs its token")
-        if self.proxies:
+        if self.proxies or not self.loopback:
             return Refusal(HTTPStatus.FORBIDDEN, "only Home Assistant's ingress opens this page")
         if _host_name(request.headers.get("host", "")) not in _LOOPBACK_NAMES:
             return Refusal(HTTPStatus.FORBIDDEN, "open the page as localhost or 127.0.0.1")

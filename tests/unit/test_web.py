@@ -64,6 +64,25 @@ def test_with_a_token_a_bearer_header_or_the_session_cookie_gets_in() -> None:
     assert Access(token=None, proxies=frozenset()).login("") is False
 
 
+def test_a_token_of_spaces_is_no_token_and_a_wide_page_without_one_lets_nobody_in() -> None:
+    with pytest.raises(ValidationError, match="spaces do not count"):
+        WebConfig(enabled=True, host="0.0.0.0", token=" " * 16)
+    with pytest.raises(ValidationError, match="spaces do not count"):
+        WebConfig(enabled=True, host="0.0.0.0", token=" " * 15 + "a")
+    wide = Access(token=None, proxies=frozenset(), loopback=False)
+    for host in ("localhost", "127.0.0.1:8099"):  # a client names any Host it likes
+        refusal = wide.refusal(request(peer="192.168.1.50", host=host))
+        assert refusal is not None and refusal.status == HTTPStatus.FORBIDDEN
+
+
+def test_a_token_file_that_holds_no_token_keeps_the_page_shut(tmp_path: Path) -> None:
+    blank = tmp_path / "token"
+    blank.write_text("   \n")
+    web = WebConfig(enabled=True, host="0.0.0.0", token_file=blank)
+    with pytest.raises(ConfigError, match="token is missing"):
+        Access.of(web)
+
+
 def test_the_ingress_proxy_needs_no_token_and_nobody_else_gets_in_without_one() -> None:
     access = Access(token=None, proxies=frozenset({"172.30.32.2"}))
     assert access.refusal(request(peer="172.30.32.2", host="anything")) is None
