@@ -128,8 +128,11 @@ def parse_head(head: bytes, peer: str = "") -> tuple[Request, int]:
     length = int(length_text)
     if length > BODY_LIMIT:
         raise BadRequestError(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, f"at most {BODY_LIMIT} bytes")
-    split = urlsplit(target)
-    query = dict(parse_qsl(split.query, max_num_fields=20))
+    try:
+        split = urlsplit(target)
+        query = dict(parse_qsl(split.query, max_num_fields=20))
+    except ValueError as exc:  # "//[" (a broken IPv6 host), more than 20 query fields
+        raise BadRequestError(HTTPStatus.BAD_REQUEST, f"bad request target: {exc}") from None
     request = Request(method.upper(), unquote(split.path), query, headers, peer=peer)
     return request, length
 

@@ -77,6 +77,8 @@ async def test_requests_are_parsed_and_answered() -> None:
     [
         (b"GARBAGE\r\n\r\n", 400),
         (b"GET noslash HTTP/1.1\r\n\r\n", 400),
+        (b"GET //[ HTTP/1.1\r\n\r\n", 400),  # urlsplit: invalid IPv6 URL
+        (b"GET /?" + b"&".join(b"k%d=1" % i for i in range(30)) + b" HTTP/1.1\r\n\r\n", 400),
         (b"GET / HTTP/2.0\r\n\r\n", 505),
         (b"GET / HTTP/1.1\r\nno colon here\r\n\r\n", 400),
         (b"POST / HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n", 411),

@@ -145,8 +145,10 @@ def test_a_request_head_is_parsed_whole() -> None:
 
 def test_too_many_query_fields_are_refused() -> None:
     target = "/?" + "&".join(f"k{i}=1" for i in range(50))
-    with pytest.raises(ValueError, match="Max number of fields"):
+    with pytest.raises(BadRequestError, match="Max number of fields"):
         parse_head(f"GET {target} HTTP/1.1\r\n\r\n".encode())
+    with pytest.raises(BadRequestError, match="Invalid IPv6"):
+        parse_head(b"GET //[ HTTP/1.1\r\n\r\n")
     with pytest.raises(BadRequestError):
         parse_head(b"GET / HTTP/1.1\r\n Folded: header\r\n\r\n")
 
