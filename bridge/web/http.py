@@ -30,6 +30,7 @@ from urllib.parse import parse_qsl, unquote, urlsplit
 log = logging.getLogger(__name__)
 HEAD_LIMIT = 16 * 1024
 BODY_LIMIT = 64 * 1024
+BUSY_HEAD_TIMEOUT = 1.0  # seconds an over-the-cap connection may take to ask (answered 503)
 HEAD_TIMEOUT = 10.0
 SEND_TIMEOUT = 10.0
 MAX_CONNECTIONS = 64
@@ -162,7 +163,10 @@ class HttpServer:
         if task is not None:  # always: asyncio runs each connection's handler in a task
             self._tasks.add(task)
         try:
-            await self._one_request(reader, writer, busy=len(self._tasks) > self.max_connections)
+            open_now = len(self._tasks)
+            if open_now > 2 * self.max_connections:
+                return  # far beyond the cap: closed unread, nothing held
+            await self._one_request(reader, writer, busy=open_now > self.max_connections)
         except (ConnectionError, TimeoutError):
             pass  # the client went away or never finished asking: nothing to answer
         except asyncio.CancelledError:
@@ -180,7 +184,7 @@ class HttpServer:
     ) -> None:
         peer = writer.get_extra_info("peername")
         try:
-            async with asyncio.timeout(HEAD_TIMEOUT):
+            async with asyncio.timeout(BUSY_HEAD_TIMEOUT if busy else HEAD_TIMEOUT):
                 head = await reader.readuntil(b"\r\n\r\n")
                 request, length = parse_head(head, peer[0] if peer else "")
                 body = await reader.readexactly(length) if length else b""
@@ -241,6 +245,8 @@ class HttpServer:
                 watching.add_done_callback(lambda _: streaming.cancel())
         except* (ConnectionError, TimeoutError):
             pass  # the client went away
+        except* Exception:  # a bug in one stream must not end the server
+            log.exception("web event stream failed")
 
     async def close(self) -> None:
         """End every connection (event streams included) and wait for them."""

@@ -131,6 +131,22 @@ async def test_connections_beyond_the_limit_are_answered_busy() -> None:
 
 
 @pytest.mark.asyncio
+async def test_idle_sockets_beyond_the_limit_are_not_held() -> None:
+    """Sockets that never ask: over the cap each is let go after BUSY_HEAD_TIMEOUT, far
+    over it at once, so idle sockets cannot pile up (file descriptors the bridge needs)."""
+    server = HttpServer(echo, max_connections=2)
+    async with serving(server) as port:
+        idle = [await asyncio.open_connection("127.0.0.1", port) for _ in range(20)]
+        await asyncio.sleep(0.2)
+        assert len(server._tasks) <= 2 * server.max_connections + 1
+        async with asyncio.timeout(5):  # the over-the-cap ones go after 1 s
+            while len(server._tasks) > server.max_connections:
+                await asyncio.sleep(0.05)
+        for _, writer in idle:
+            writer.close()
+
+
+@pytest.mark.asyncio
 async def test_an_event_stream_nobody_reads_is_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
     """A stuck browser tab cannot make the server buffer without end."""
     monkeypatch.setattr(web_http, "SEND_TIMEOUT", 0.5)
