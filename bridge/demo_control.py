@@ -32,8 +32,8 @@ def fault_request(simulator: Simulator, units: dict[str, int]) -> Callable[[byte
                 raise ValueRejectedError("give a JSON object: {device, fault}")
             transaction = data.get("transaction")
             device = data.get("device")
-            if device not in units:
-                raise ValueRejectedError(f"device: one of {sorted(units)}, not {device!r}")
+            if not isinstance(device, str) or device not in units:
+                raise ValueRejectedError(f"device: one of {sorted(units)}, not {device!r:.60}")
             fault = data.get("fault")
             if fault is None:
                 simulator.clear_faults(units[device])

@@ -1,0 +1,32 @@
+"""The demo's ``demo/fault`` request: every malformed payload is answered, none raises."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+
+import pytest
+
+from bridge.core.mapping import builtin_mapping_path, load_mapping
+from bridge.demo_control import fault_request
+from bridge.modbus.simulator import SimulatedUnit, Simulator
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b'{"device": ["borehole_pump"]}',  # unhashable: was a TypeError out of the handler
+        b'{"device": {"a": 1}}',
+        b'{"device": 7}',
+        b'{"device": "nowhere"}',
+        b'{"device": "borehole_pump", "fault": 3}',
+        b"[1, 2]",
+        b"not json",
+    ],
+)
+def test_a_malformed_fault_request_is_answered_with_an_error(payload: bytes) -> None:
+    simulator = Simulator([SimulatedUnit(1, load_mapping(builtin_mapping_path("nastec_vasco")))])
+    handle = fault_request(simulator, {"borehole_pump": 1})
+    answer = json.loads(asyncio.run(handle(payload)))
+    assert answer["status"] == "error" and answer["error"]
+    assert simulator.faults(1) == []
