@@ -25,13 +25,16 @@ runtime cannot declare a guarded register harmless.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from decimal import ROUND_CEILING, Decimal
+from typing import TypeVar
 
 from bridge.core.codec import COMMAND_PRESS, encode, to_signed
 from bridge.core.entity import DataType, Entity, Table
 from bridge.core.mapping import Point
+
+T = TypeVar("T")
 
 Cell = tuple[Table, int]
 Floor = tuple[int, bool]  # the lowest raw value allowed, and whether the word is signed
@@ -81,20 +84,20 @@ class Guard:
         return cls(dangerous, frozenset(hidden), words, floors)
 
     def __or__(self, other: Guard) -> Guard:
-        if not (other.dangerous or other.hidden or other.dangerous_words):
+        if not other:
             return self
-        if not (self.dangerous or self.hidden or self.dangerous_words):
+        if not self:
             return other
-        dangerous = dict(self.dangerous)
-        for cell, bits in other.dangerous.items():
-            dangerous[cell] = dangerous.get(cell, 0) | bits
-        words = dict(self.dangerous_words)
-        for cell, values in other.dangerous_words.items():
-            words[cell] = words.get(cell, frozenset()) | values
-        floors = dict(self.floors)
-        for cell, limits in other.floors.items():
-            floors[cell] = floors.get(cell, frozenset()) | limits
-        return Guard(dangerous, self.hidden | other.hidden, words, floors)
+        return Guard(
+            _merged(self.dangerous, other.dangerous, lambda a, b: a | b),
+            self.hidden | other.hidden,
+            _merged(self.dangerous_words, other.dangerous_words, frozenset.union),
+            _merged(self.floors, other.floors, frozenset.union),
+        )
+
+    def __bool__(self) -> bool:
+        """True when anything is guarded or hidden."""
+        return bool(self.dangerous or self.hidden or self.dangerous_words or self.floors)
 
     def dangerous_in(self, table: Table, address: int, values: tuple[int, ...]) -> list[int]:
         """Guarded addresses a raw write of ``values`` from ``address`` would touch: any
@@ -156,6 +159,15 @@ def _add(dangerous: dict[Cell, int], point: Point) -> None:
         bits = 1
     for cell in _cells(point.table, point.write_address, point.count):
         dangerous[cell] = dangerous.get(cell, 0) | bits
+
+
+def _merged(
+    first: Mapping[Cell, T], second: Mapping[Cell, T], join: Callable[[T, T], T]
+) -> dict[Cell, T]:
+    merged = dict(first)
+    for cell, value in second.items():
+        merged[cell] = join(merged[cell], value) if cell in merged else value
+    return merged
 
 
 def _cells(table: Table, address: int, count: int) -> set[Cell]:

@@ -154,3 +154,22 @@ def test_a_floor_follows_scale_offset_and_signedness() -> None:
     assert guard.dangerous_in(Table.HOLDING, 0, (0xFFE6,)) == [0]  # -26 = -2.6
     assert guard.dangerous_in(Table.HOLDING, 1, (40,)) == []  # raw 40 - 40 = 0
     assert guard.dangerous_in(Table.HOLDING, 1, (39,)) == [1]  # -1
+
+
+def test_a_guard_of_floors_alone_survives_every_merge() -> None:
+    """A mapping whose only guard is a floor (no dangerous entity): the poller builds its
+    guard as ``earlier | own``, and a reload as ``own | new``; the floor stays in both."""
+    floor_only = make_mapping(
+        {
+            "reference": {
+                "name": "Reference", "address": 0, "type": "s16", "access": "rw",
+                "dangerous_below": 0,
+            },
+        }
+    )  # fmt: skip
+    harmless = make_mapping({"other": {"name": "Other", "address": 5, "access": "rw"}})
+    own = Guard.of(floor_only.points().values())
+    assert own and not Guard()
+    for merged in (UNGUARDED | own, own | Guard.of(harmless.points().values()), own | own):
+        assert merged.floors == own.floors
+        assert merged.dangerous_in(Table.HOLDING, 0, (0xFFFF,)) == [0]  # -1 stays guarded
