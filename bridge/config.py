@@ -287,7 +287,7 @@ class DeviceConfig(_Strict):
         logged); None when none is configured or its source is gone."""
         try:
             return secret_of(self.password, self.password_file, self.password_env)
-        except OSError:
+        except (OSError, UnicodeDecodeError):  # gone, unreadable, or not text
             return None
 
 
@@ -563,13 +563,14 @@ def _device_password_errors(
             errors.append(
                 f"{where}.password_env: environment variable {device.password_env} is not set"
             )
-        elif not _is_register_number(device.password_value()):
+        elif not is_register_number(device.password_value()):
             errors.append(f"{where}.{field}: the password must be a number 0..65535")
     return errors
 
 
-def _is_register_number(text: str | None) -> bool:
-    return text is not None and text.isdigit() and int(text) <= 0xFFFF
+def is_register_number(text: str | None) -> bool:
+    """A password a device's unlock register takes: ASCII digits, 0..65535 ("12³" is none)."""
+    return text is not None and text.isascii() and text.isdigit() and int(text) <= 0xFFFF
 
 
 def secret_of(value: SecretStr | None, file: Path | None, env: str | None) -> str | None:

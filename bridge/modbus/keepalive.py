@@ -35,7 +35,9 @@ async def keep_alive(poller: DevicePoller) -> None:
         _report_lapse(poller, now)
         due = dog.due()
         if due is not None and poller.health.online is True and now >= due:
-            await _read_once(poller)
+            if await _read_once(poller):
+                continue
+            await asyncio.sleep(dog.interval / 2)  # nothing to read: never spin the loop
             continue
         await asyncio.sleep(_next_wake(poller, now) - now)
 
@@ -68,13 +70,15 @@ def _report_lapse(poller: DevicePoller, now: float) -> None:
     )
 
 
-async def _read_once(poller: DevicePoller) -> None:
-    """One keepalive read: the first block the fast polls read (its values published)."""
+async def _read_once(poller: DevicePoller) -> bool:
+    """One keepalive read: the first block the fast polls read (its values published);
+    False when there is no block to read (every entity polled once, or refused)."""
     plan = poller.plan_of(PollClass.FAST) or poller.plan_of(PollClass.SLOW)
     if not plan:
-        return
+        return False
     read = plan[0]
     fresh: set[tuple[Table, int]] = set()
     await poller.read_block(read, Priority.KEEPALIVE, fresh)
     keys = [k for k, p in poller.points.items() if {(p.table, a) for a in p.span} & fresh]
     poller.publish(keys, fresh)
+    return True

@@ -22,7 +22,7 @@ import asyncio
 import logging
 from collections.abc import Awaitable, Callable
 
-from bridge.config import DeviceConfig
+from bridge.config import DeviceConfig, is_register_number
 from bridge.core.address import to_wire
 from bridge.core.entity import Table
 from bridge.core.protocol import Protocol
@@ -94,7 +94,7 @@ class Unlocker:
             self.failed = "locked by a password, and its mapping has no password unlock"
             return False
         password = self.device.password_value()
-        if password is None or not password.isdigit() or int(password) > 0xFFFF:
+        if password is None or not is_register_number(password):
             self.failed = (
                 f"locked by a password: set {where}.password_env or {where}.password_file "
                 "(a number 0..65535)"

@@ -435,6 +435,38 @@ async def test_a_soft_starter_hears_from_the_bridge_while_commissioning_holds_th
             assert starter.health.online is True
 
 
+def polled_once(loaded: Any, device_id: str) -> Any:
+    """The device's mapping with every entity read once at start-up: no poll block left."""
+    mapping = loaded.mappings[device_id]
+    entities = {
+        key: entity.model_copy(update={"poll": PollClass.ONCE})
+        for key, entity in mapping.entities.items()
+    }
+    loaded.mappings[device_id] = mapping.model_copy(update={"entities": entities})
+    return loaded
+
+
+@pytest.mark.timeout(30)  # a spinning keepalive would block the loop: the signal ends it
+@pytest.mark.asyncio
+async def test_a_keepalive_with_nothing_to_read_leaves_the_event_loop_alone() -> None:
+    """Every entity read once: the keepalive finds no block to read. It must wait, not spin
+    (a loop that never awaits would freeze the whole bridge)."""
+    sim = simulator((1, "soft_starter"))
+    async with serving_tcp(sim) as port:
+        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
+        engine = Engine(polled_once(with_keepalive(loaded, "soft_starter", 0.2), "soft_starter"))
+        async with running(engine):
+            starter = engine.devices["soft_starter"]
+            await eventually(lambda: starter.health.online is True)
+            assert starter.plan_of(PollClass.FAST) == () == starter.plan_of(PollClass.SLOW)
+            ticks = 0
+            for _ in range(10):  # 1 s: five keepalive intervals with nothing to read
+                await asyncio.sleep(0.1)
+                ticks += 1
+            assert ticks == 10
+            assert starter.health.online is True
+
+
 @pytest.mark.asyncio
 async def test_a_watchdog_that_could_not_be_fed_is_reported_once(
     caplog: pytest.LogCaptureFixture,

@@ -297,12 +297,22 @@ def test_a_device_password_from_a_file_or_the_environment(
         ("password_env: NOT_SET_ANYWHERE", "devices.drive.password_env: environment variable"),
         ("password: 'secret'", "devices.drive.password: the password must be a number"),
         ("password: '70000'", "devices.drive.password: the password must be a number"),
+        ("password: '12³'", "devices.drive.password: the password must be a number"),
     ],
 )
 def test_device_password_errors_never_show_it(tmp_path: Path, fields: str, expected: str) -> None:
     rows = issues(tmp_path, DRIVE % fields)
     assert any(row.startswith(expected) for row in rows), rows
     assert not any("secret" in row or "70000" in row for row in rows), rows
+
+
+def test_a_password_file_that_is_not_text_is_no_password(tmp_path: Path) -> None:
+    """Read at run time: a garbled file is refused, never an exception out of the poll."""
+    secret = tmp_path / "p2"
+    secret.write_text("12345\n")
+    drive = load_config(write(tmp_path, DRIVE % f"password_file: {secret}")).config.devices[0]
+    secret.write_bytes(b"\xe9\xff")
+    assert drive.password_value() is None
 
 
 def test_a_password_needs_a_mapping_that_unlocks(tmp_path: Path) -> None:
