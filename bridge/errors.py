@@ -85,7 +85,13 @@ class CommandRejectedError(ValueRejectedError):
 
 
 class CommandExpiredError(BridgeError):
-    """A command could not be sent before its expiry; it was dropped, never sent late."""
+    """A command could not be sent before its expiry; it was dropped, never sent late.
+    ``sent``: an earlier attempt went out and was not answered (the device may have acted
+    on it); only its resend was dropped."""
+
+    def __init__(self, message: str, *, sent: bool = False) -> None:
+        super().__init__(message)
+        self.sent = sent
 
 
 class ModbusError(BridgeError):

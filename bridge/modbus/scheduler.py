@@ -10,9 +10,10 @@ while jobs wait; every job still ends in its own deadline's error, never hangs.
 A write is never cut short: a compound write (``WriteSequence``: a sign and a magnitude,
 a pulse's edges, the keys of one /set) goes out frame after frame with nothing between
 them, and when a frame after the first fails the frames already written are undone. A
-command's deadline is checked right before its first frame is sent, never later: the
-frames after it always follow. When the bus is stopped (shutdown, a mapping reload), the
-write in flight is finished first, for at most ``FINISH_WRITE`` seconds.
+command's deadline is checked right before its first frame is sent and before a resend
+of it after a timeout, never later: the frames after the first always follow. When the
+bus is stopped (shutdown, a mapping reload), the write in flight is finished first, for at
+most ``FINISH_WRITE`` seconds.
 
 On links whose replies do not name their request (RTU, ASCII, RTU over TCP: no
 transaction id), a unit that did not answer in time may still answer, and its late reply
@@ -80,6 +81,7 @@ class _Job:
     protocol: Protocol
     future: asyncio.Future[tuple[int, ...]]
     deadline: float | None = None
+    sent: bool = False  # a frame of it went out (a resend after the deadline is dropped)
 
 
 _Entry = tuple[int, int, _Job]  # (priority, sequence, job): the heap's order
@@ -302,7 +304,8 @@ class BusScheduler:
         try:
             await self._ensure_open()
             if first and job.deadline is not None and time.monotonic() > job.deadline:
-                raise CommandExpiredError("expired: not sent within the command expiry")
+                raise _expired(job)
+            job.sent = True
             return await self._transaction(job, request)
         except DeviceExceptionError as raw:
             meaning = exception_meaning(raw.code, job.protocol)
@@ -425,3 +428,14 @@ class _Resend(Exception):  # noqa: N818 - a signal inside the scheduler, never r
 def _settle(job: _Job, exc: Exception) -> None:
     if not job.future.done():
         job.future.set_exception(exc)
+
+
+def _expired(job: _Job) -> CommandExpiredError:
+    """The error of a job whose deadline passed before its (re)send."""
+    if not job.sent:
+        return CommandExpiredError("expired: not sent within the command expiry")
+    return CommandExpiredError(
+        "expired before its resend: sent once without an answer (the device may have acted "
+        "on it), not sent again after the command expiry",
+        sent=True,
+    )

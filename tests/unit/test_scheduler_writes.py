@@ -168,3 +168,54 @@ async def test_the_deadline_is_checked_after_the_port_opened() -> None:
         )
     assert sent(transport) == []
     await stop(task)
+
+
+@dataclass
+class SilentFirst(ScriptedTransport):
+    """The unit does not answer the first frame: its timeout lasts ``wait`` seconds."""
+
+    wait: float = 0.2
+
+    async def execute(self, unit: int, request: object, timeout: float) -> tuple[int, ...]:
+        if not self.calls:
+            self.calls.append((unit, request, time.monotonic()))
+            await asyncio.sleep(self.wait)
+            raise DeviceTimeoutError(f"unit {unit} did not answer")
+        return await super().execute(unit, request, timeout)
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("request_", [MAGNITUDE, SEQUENCE])
+async def test_a_resend_after_the_deadline_is_dropped_and_says_the_first_went_out(
+    request_: Write | WriteSequence,
+) -> None:
+    """The first frame went out and timed out past the command's expiry: the resend is not
+    sent, and the error does not claim that nothing was (the device may have acted)."""
+    transport = SilentFirst()
+    scheduler, task = await started(transport)
+    with pytest.raises(CommandExpiredError) as caught:
+        await scheduler.submit(
+            9,
+            request_,
+            timeout=1,
+            priority=Priority.WRITE,
+            retries=1,
+            deadline=time.monotonic() + 0.1,
+        )
+    assert caught.value.sent is True
+    assert "sent once without an answer" in str(caught.value)
+    assert len(sent(transport)) == 1
+    await stop(task)
+
+
+@pytest.mark.asyncio
+async def test_a_command_never_sent_says_so() -> None:
+    transport = SlowToOpen()
+    scheduler, task = await started(transport)
+    with pytest.raises(CommandExpiredError) as caught:
+        await scheduler.submit(
+            9, MAGNITUDE, timeout=1, priority=Priority.WRITE, deadline=time.monotonic() + 0.1
+        )
+    assert caught.value.sent is False
+    assert "not sent within the command expiry" in str(caught.value)
+    await stop(task)
