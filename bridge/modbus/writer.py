@@ -87,6 +87,7 @@ class DeviceWriter:
         self, items: dict[str, object], deadline: float | None
     ) -> dict[str, Value]:
         points = self._allowed(items)
+        _check_conditions_alone(points)
         needed = [r for p in points for r in _dependencies(p, self._required(p))]
         await self._refresh(list(dict.fromkeys(needed)))
         self._check_requirements(points)
@@ -101,13 +102,23 @@ class DeviceWriter:
             if len(writes) == 1
             else WriteSequence(tuple(writes), _undo(writes, self.poller.image))
         )
-        for point in points:  # an attempt counts: a toggle that timed out may have acted
-            if point.entity.write_interval is not None and point.key in plan:
-                self.counters.last_attempt[point.write_address] = time.monotonic()
+        attempts = self.counters.last_attempt
+        spaced = [
+            p.write_address for p in points if p.entity.write_interval is not None and p.key in plan
+        ]
+        before = {a: attempts[a] for a in spaced if a in attempts}
+        for address in spaced:  # an attempt counts: a toggle that timed out may have acted
+            attempts[address] = time.monotonic()
         try:
             await self.poller.submit(request, Priority.WRITE, retries=retries, deadline=deadline)
         except PartialWriteError as partial:
             raise await self._report_partial(points, partial) from None
+        except CommandExpiredError as expired:
+            if not expired.sent:  # nothing went out: the spacing is as it was
+                for address in spaced:
+                    attempts.pop(address, None)
+                attempts.update(before)
+            raise
         for write in writes:
             self._store(write)
         self.counters.done += len(plan)  # per key, like skipped_unchanged
@@ -120,6 +131,12 @@ class DeviceWriter:
         for point in written:
             held[point.key] = await self._written_value(point, items[point.key])
         return {p.key: held[p.key] for p in points}
+
+    def inherit(self, earlier: DeviceWriter) -> None:
+        """Keep the spacing of the writer this one replaces (a mapping reload): a toggle or
+        an EEPROM parameter written just before is not written again sooner for it."""
+        self.counters.last_write.update(earlier.counters.last_write)
+        self.counters.last_attempt.update(earlier.counters.last_attempt)
 
     def _allowed(self, items: dict[str, object]) -> list[Point]:
         """The points of a command, each known, writable and not guarded; else nothing."""
@@ -346,6 +363,24 @@ def _unchanged(point: Point, writes: tuple[Write, ...], image: dict[Address, int
         and all(image.get(cell) == word for w in writes for cell, word in _stored(w).items())
         and all(w.function not in (5, 15) for w in writes)
     )
+
+
+def _check_conditions_alone(points: list[Point]) -> None:
+    """A key with ``requires`` goes in a command of its own: its conditions are checked
+    against the device as read before the command, which the command's other keys may
+    change (a mode written with the start it conditions)."""
+    if len(points) < 2:
+        return
+    refused = {
+        p.key: (
+            f"{p.key} has conditions ({', '.join(p.entity.requires)}) checked against the "
+            "device as read before the command: send it in a command of its own"
+        )
+        for p in points
+        if p.entity.requires
+    }
+    if refused:
+        raise CommandRejectedError(refused, [p.key for p in points])
 
 
 def _one_frame_per_word(plan: dict[str, tuple[Write, ...]], pulses: set[str]) -> list[Write]:
