@@ -22,6 +22,7 @@ from bridge.core.entity import Table
 from bridge.core.mapping import Point
 from bridge.core.planner import plan_reads
 from bridge.core.request import Read, Write, WriteSequence
+from bridge.core.write_plan import dependencies, frames_of, stored, unchanged, undo_of
 from bridge.errors import (
     CommandExpiredError,
     CommandRejectedError,
@@ -88,19 +89,19 @@ class DeviceWriter:
     ) -> dict[str, Value]:
         points = self._allowed(items)
         _check_conditions_alone(points)
-        needed = [r for p in points for r in _dependencies(p, self._required(p))]
+        needed = [r for p in points for r in dependencies(p, self._required(p))]
         await self._refresh(list(dict.fromkeys(needed)))
         self._check_requirements(points)
         plan = self._encode_all(points, items)
         held = {p.key: self._held(p) for p in points if p.key not in plan}
         if not plan:
             return held  # every key unchanged (EEPROM, a toggle in place): nothing to write
-        writes = _one_frame_per_word(plan, {p.key for p in points if p.entity.pulse})
+        writes = frames_of(plan, {p.key for p in points if p.entity.pulse})
         retries = self.poller.retries if all(p.entity.idempotent for p in points) else 0
         request: Write | WriteSequence = (
             writes[0]
             if len(writes) == 1
-            else WriteSequence(tuple(writes), _undo(writes, self.poller.image))
+            else WriteSequence(tuple(writes), undo_of(writes, self.poller.image))
         )
         attempts = self.counters.last_attempt
         spaced = [
@@ -171,7 +172,7 @@ class DeviceWriter:
                 writes = encode(point, items[point.key], after)
                 self._check_unguarded(point, writes, after)
                 if not writes or (
-                    entity.eeprom and entity.readable and _unchanged(point, writes, after)
+                    entity.eeprom and entity.readable and unchanged(point, writes, after)
                 ):
                     self.counters.skipped_unchanged += 1  # no wear, no second toggle
                     continue
@@ -183,7 +184,7 @@ class DeviceWriter:
                 continue
             plan[point.key] = writes
             for write in writes:
-                after |= _stored(write)
+                after |= stored(write)
         if refused:
             raise CommandRejectedError(refused, list(items))
         return plan
@@ -296,7 +297,7 @@ class DeviceWriter:
                 limit = point.entity.dangerous_below
                 below = f": a value below {limit:g}" if limit is not None else ""
                 raise self._guarded(point.key + below)
-            image |= _stored(w)
+            image |= stored(w)
 
     def _guarded(self, subject: str) -> ValueRejectedError:
         return ValueRejectedError(
@@ -324,7 +325,7 @@ class DeviceWriter:
                 )
 
     def _store(self, write: Write) -> None:
-        self.poller.image.update(_stored(write))
+        self.poller.image.update(stored(write))
 
     async def _read_back(self, point: Point) -> Value:
         targets = [point] + ([point.sign] if point.sign is not None else [])
@@ -333,36 +334,6 @@ class DeviceWriter:
             await self.poller.read_block(read, Priority.WRITE, fresh)
         self.poller.publish([point.key], fresh)
         return self.poller.values.get(point.key)
-
-
-def _dependencies(point: Point, required: list[Point]) -> list[Read]:
-    """What a write of ``point`` must read fresh first: the word of a bit field (even of a
-    write-only bit), a sign register, limit registers, an EEPROM parameter's current value,
-    the state a toggle flips, the values it ``requires``."""
-    entity = point.entity
-    linked = (point.sign, point.min_source, point.max_source, point.state_source)
-    sources = [p for p in linked if p is not None] + required
-    reads = [Read(p.table, p.address, p.count) for p in sources]
-    if entity.field_width is not None or (entity.eeprom and entity.readable):
-        reads.append(Read(point.table, point.address, point.count))
-    return list(dict.fromkeys(reads))
-
-
-def _stored(write: Write) -> dict[Address, int]:
-    """The words a register write leaves in the image; coil commands leave nothing (they
-    may live in another space than the status bits)."""
-    if write.function in (5, 15):
-        return {}
-    return {(write.table, write.address + i): word for i, word in enumerate(write.values)}
-
-
-def _unchanged(point: Point, writes: tuple[Write, ...], image: dict[Address, int]) -> bool:
-    """The device already holds what these writes would put there (EEPROM skip)."""
-    return (
-        point.write_address == point.address
-        and all(image.get(cell) == word for w in writes for cell, word in _stored(w).items())
-        and all(w.function not in (5, 15) for w in writes)
-    )
 
 
 def _check_conditions_alone(points: list[Point]) -> None:
@@ -381,46 +352,6 @@ def _check_conditions_alone(points: list[Point]) -> None:
     }
     if refused:
         raise CommandRejectedError(refused, [p.key for p in points])
-
-
-def _one_frame_per_word(plan: dict[str, tuple[Write, ...]], pulses: set[str]) -> list[Write]:
-    """The frames of a command in key order. Where several keys write the same register
-    (bit fields of one word), the word goes out once, at the first key's place, holding
-    every key's bits (each key was encoded over the word the keys before it left): one
-    EEPROM write, not several. Registers a pulse writes keep every frame."""
-    frames = [(key, w) for key, writes in plan.items() for w in writes]
-    pulsed = {(w.table, w.address) for key, w in frames if key in pulses}
-    final: dict[tuple[Table, int, int], Write] = {}
-    for key, w in frames:
-        if key not in pulses and w.function in (6, 16) and (w.table, w.address) not in pulsed:
-            final[(w.table, w.address, len(w.values))] = w
-    result: list[Write] = []
-    sent: set[tuple[Table, int, int]] = set()
-    for key, w in frames:
-        place = (w.table, w.address, len(w.values))
-        if key in pulses or place not in final:
-            result.append(w)
-        elif place not in sent:
-            sent.add(place)
-            result.append(final[place])
-    return result
-
-
-def _undo(writes: list[Write], image: dict[Address, int]) -> tuple[Write | None, ...]:
-    """For each write, the write that puts back what the device held before it (as far
-    as the image knows; None where it does not: a write-only command register, a coil
-    command). Writes earlier in the list are taken into account."""
-    before = dict(image)
-    undo: list[Write | None] = []
-    for write in writes:
-        cells = [(write.table, write.address + i) for i in range(len(write.values))]
-        if write.function in (5, 15) or any(cell not in before for cell in cells):
-            undo.append(None)
-        else:
-            old = tuple(before[cell] for cell in cells)
-            undo.append(Write(write.function, write.table, write.address, old))
-        before |= _stored(write)
-    return tuple(undo)
 
 
 def _word(value: object) -> str:
