@@ -229,8 +229,8 @@ Bus = Annotated[SerialBus | TcpBus, Field(discriminator="transport")]
 
 
 class PollConfig(_Strict):
-    fast: Duration = 2.0
-    slow: Duration = 60.0
+    fast: Duration = Field(2.0, gt=0)
+    slow: Duration = Field(60.0, gt=0)
 
 
 class ProtocolOverride(_Strict):
@@ -240,7 +240,7 @@ class ProtocolOverride(_Strict):
     max_read_bits: int | None = Field(None, ge=1, le=2000)
     coil_on_value: int | None = Field(None, ge=0, le=0xFFFF)
     min_request_interval: Duration | None = None
-    response_timeout: Duration | None = None
+    response_timeout: Duration | None = Field(None, gt=0)
 
 
 class DeviceConfig(_Strict):

@@ -194,7 +194,9 @@ class Entity(BaseModel):
         "switch whose ON/OFF is sent (as the ON word) only when the state read differs",
     )
     write_interval: Duration | None = Field(
-        None, description="least time between two writes (a toggle is never sent twice within)"
+        None,
+        gt=0,
+        description="least time between two writes (a toggle is never sent twice within)",
     )
     requires: dict[str, bool | str | list[str]] = Field(
         default_factory=dict,

@@ -33,7 +33,7 @@ class Keepalive(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    interval: Duration
+    interval: Duration = Field(gt=0)
     note: str | None = None
 
 
@@ -100,7 +100,7 @@ class Protocol(BaseModel):
     coil_on_value: int = Field(0xFF00, ge=0, le=0xFFFF, description="FC05 ON value")
     exceptions: dict[int, ExceptionMeaning] = Field(default_factory=dict)
     min_request_interval: Duration = Field(0.0, description="silence between two requests")
-    response_timeout: Duration = 1.0
+    response_timeout: Duration = Field(1.0, gt=0)
     keepalive: Keepalive | None = None
     unlock: Unlock | None = Field(None, description="password unlock (the device's password)")
     eeprom_write_interval: Duration = Field(

@@ -111,6 +111,16 @@ devices:
     [
         (("unit: 1", "unit: 300"), "devices.pump.unit: Input should be less than or equal to 255"),
         (("unit: 1", "unit: 250"), "devices.pump.unit: serial lines address units 1..247"),
+        (
+            ("unit: 1", "unit: 1, poll: {fast: 0}"),
+            "devices.pump.poll.fast: Input should be greater",
+        ),
+        (("unit: 1", "unit: 1, poll: {slow: .nan}"), "devices.pump.poll.slow: a duration must be"),
+        (("unit: 1", "unit: 1, poll: {fast: .inf}"), "devices.pump.poll.fast: a duration must be"),
+        (
+            ("unit: 1", "unit: 1, protocol: {response_timeout: 0s}"),
+            "devices.pump.protocol.response_timeout: Input should be greater than 0",
+        ),
         (("bus: rs485", "bus: nowhere"), "devices.pump.bus: no bus 'nowhere' (have ['rs485'])"),
         (("id: pump", "id: Pump!"), "devices.Pump!.id: ids are lowercase"),
         (("transport: rtu", "transport: can"), "buses.rs485: Input tag 'can' found"),

@@ -185,6 +185,8 @@ def test_fc16_only_device_writes_single_registers_with_16() -> None:
         ({"access": "rw", "byte_order": "little", "dangerous_below": 0}, "a positive scale"),
         ({"requires": {"x": True}}, "requires/write_interval describe writes"),
         ({"write_interval": "2s"}, "requires/write_interval describe writes"),
+        ({"access": "rw", "write_interval": 0}, "write_interval: Input should be greater than 0"),
+        ({"access": "rw", "write_interval": float("nan")}, "a duration must be a finite"),
         ({"toggle_of": "x", "access": "rw"}, "toggle_of is for a write-only coil"),
         ({"toggle_of": "x", "table": "coil", "access": "w", "press": True}, "not a button"),
     ],
