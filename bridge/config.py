@@ -18,6 +18,7 @@ from typing import Annotated, Any, Literal, Self
 from urllib.parse import unquote, urlsplit
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -25,6 +26,7 @@ from pydantic import (
     SecretStr,
     TypeAdapter,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -52,12 +54,23 @@ class _Strict(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
+def _from_config_folder(path: Path, info: ValidationInfo) -> Path:
+    """A relative path is taken from the config file's folder (``context["base"]``), as
+    mapping paths are: a service's working directory is often ``/``."""
+    base = info.context.get("base") if isinstance(info.context, dict) else None
+    return path if base is None or path.is_absolute() else base / path
+
+
+FilePath = Annotated[Path, AfterValidator(_from_config_folder)]
+"""A file a config names (a secret, a certificate); relative to the config file."""
+
+
 class TlsConfig(_Strict):
     """TLS for mqtts://: CA bundle, optional client certificate, or no verification."""
 
-    ca: Path | None = None
-    cert: Path | None = None
-    key: Path | None = None
+    ca: FilePath | None = None
+    cert: FilePath | None = None
+    key: FilePath | None = None
     insecure: bool = Field(False, description="skip certificate verification (testing only)")
 
 
@@ -71,7 +84,7 @@ class MqttConfig(_Strict):
     client_id: str | None = None
     username: str | None = None
     password: SecretStr | None = None
-    password_file: Path | None = None
+    password_file: FilePath | None = None
     password_env: str | None = None
     tls: TlsConfig | None = None
     version: Literal["5", "3.1.1"] = Field("5", description="MQTT 5, falls back to 3.1.1")
@@ -256,7 +269,7 @@ class DeviceConfig(_Strict):
     password: SecretStr | None = Field(
         None, description="the device's user password (a mapping with protocol.unlock)"
     )
-    password_file: Path | None = Field(None, description="a file holding the device password")
+    password_file: FilePath | None = Field(None, description="a file holding the device password")
     password_env: str | None = Field(
         None, description="an environment variable holding the device password"
     )
@@ -312,7 +325,7 @@ class WebConfig(_Strict):
     )
     port: int = Field(8099, ge=1, le=65535)
     token: SecretStr | None = None
-    token_file: Path | None = None
+    token_file: FilePath | None = None
     token_env: str | None = None
     ingress_proxies: list[IPvAnyAddress] = Field(
         default_factory=list,
@@ -427,7 +440,7 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
     if not isinstance(data, dict):
         raise ConfigError(str(path), ["the file must hold a mapping with mqtt, buses, devices"])
     try:
-        config = Config.model_validate(data)
+        config = Config.model_validate(data, context=_context(path))
     except ValidationError as exc:
         rows = with_ids(format_validation_errors(exc), data)
         raise ConfigError(str(path), unique(rows + _errors_of_valid_parts(data, path))) from None
@@ -445,11 +458,12 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
 def _errors_of_valid_parts(data: dict[str, Any], path: Path) -> list[str]:
     """The checks beyond fields, run on the sections, buses and devices that validate on
     their own (the invalid ones are reported already)."""
-    mqtt = _valid(MqttConfig, data.get("mqtt", {}))
-    bridge = _valid(ManagementConfig, data.get("bridge", {}))
+    context = _context(path)
+    mqtt = _valid(MqttConfig, data.get("mqtt", {}), context)
+    bridge = _valid(ManagementConfig, data.get("bridge", {}), context)
     raw_buses, raw_devices = _listed(data, "buses"), _listed(data, "devices")
-    buses = [bus for bus in (_valid(_BUS, item) for item in raw_buses) if bus is not None]
-    devices = [d for d in (_valid(DeviceConfig, item) for item in raw_devices) if d is not None]
+    buses = [bus for bus in (_valid(_BUS, item, context) for item in raw_buses) if bus]
+    devices = [d for d in (_valid(DeviceConfig, item, context) for item in raw_devices) if d]
     valid_ids = {bus.id for bus in buses}
     invalid = {b.get("id") for b in raw_buses if isinstance(b, dict)} - valid_ids
     errors = reference_errors(buses, devices, invalid_buses={str(i) for i in invalid})
@@ -467,11 +481,16 @@ def _listed(data: dict[str, Any], section: str) -> list[Any]:
     return items if isinstance(items, list) else []
 
 
-def _valid(model: Any, data: object) -> Any:
+def _context(path: Path) -> dict[str, Path]:
+    """The validation context of the config at ``path``: where its relative files are."""
+    return {"base": path.parent.absolute()}
+
+
+def _valid(model: Any, data: object, context: dict[str, Path]) -> Any:
     """``data`` validated as ``model`` (a model class or a TypeAdapter), or None."""
     validate = model.validate_python if isinstance(model, TypeAdapter) else model.model_validate
     try:
-        return validate(data)
+        return validate(data, context=context)
     except ValidationError:
         return None
 

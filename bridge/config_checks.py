@@ -110,11 +110,24 @@ def folder_errors(bridge: ManagementConfig, base: Path) -> list[str]:
 
 
 def secret_errors(mqtt: MqttConfig) -> list[str]:
+    """The broker password's file or variable, and the TLS files, are there."""
+    errors = []
     if mqtt.password_file is not None and not mqtt.password_file.is_file():
-        return [f"mqtt.password_file: no such file {str(mqtt.password_file)!r}"]
+        errors.append(f"mqtt.password_file: no such file {str(mqtt.password_file)!r}")
     if mqtt.password_env is not None and mqtt.password_env not in os.environ:
-        return [f"mqtt.password_env: environment variable {mqtt.password_env} is not set"]
-    return []
+        errors.append(f"mqtt.password_env: environment variable {mqtt.password_env} is not set")
+    tls = mqtt.tls
+    if tls is None:
+        return errors
+    files = (("ca", tls.ca), ("cert", tls.cert), ("key", tls.key))
+    errors += [
+        f"mqtt.tls.{name}: no such file {str(path)!r}"
+        for name, path in files
+        if path is not None and not path.is_file()
+    ]
+    if tls.key is not None and tls.cert is None:
+        errors.append("mqtt.tls.key: a key goes with its certificate (mqtt.tls.cert)")
+    return errors
 
 
 def with_ids(rows: Iterable[str], data: dict[str, Any]) -> list[str]:

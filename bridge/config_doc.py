@@ -119,6 +119,9 @@ Rules the tables below do not show:
   password is never logged or published. `tls` needs an `mqtts://` URL. Likewise one of
   `token`, `token_file`, `token_env` for the web page, which needs one when its `host`
   is not a loopback address (unless only Home Assistant's ingress proxy may open it).
+- Files the config names (`password_file`, `token_file`, `tls.ca`/`cert`/`key`) may be
+  relative to the config file's folder, like mapping paths; `check` says when one is
+  missing.
 - A mapping that does not list `ascii` in its transports cannot be put on an `ascii` bus.
 """
 

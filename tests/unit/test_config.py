@@ -24,6 +24,7 @@ entities:
 
 def write(tmp_path: Path, text: str) -> Path:
     (tmp_path / "t1.yaml").write_text(MAPPING)
+    (tmp_path / "ca.pem").write_text("a CA bundle\n")
     path = tmp_path / "config.yaml"
     path.write_text(text)
     return path
@@ -35,7 +36,7 @@ mqtt:
   base_topic: site/modbus
   username: bridge
   password_file: {secret}
-  tls: {ca: /etc/ssl/ca.pem}
+  tls: {ca: ca.pem}
 buses:
   - {id: rs485, transport: rtu, port: /dev/ttyUSB0, baudrate: 19200, parity: E, stopbits: 1}
   - {id: line2, transport: ascii, port: /dev/ttyUSB1, bytesize: 7}
@@ -55,6 +56,7 @@ def test_good_config(tmp_path: Path) -> None:
     assert config.mqtt.host == "broker.example"
     assert config.mqtt.port == 8883
     assert config.mqtt.password_value() == "s3cret"
+    assert config.mqtt.tls is not None and config.mqtt.tls.ca == tmp_path / "ca.pem"
     assert isinstance(config.buses[0], SerialBus)
     assert config.buses[0].parity == "E"
     assert isinstance(config.buses[2], TcpBus)
@@ -190,6 +192,9 @@ def test_disabled_device_may_share_a_unit(tmp_path: Path) -> None:
     assert load_config(write(tmp_path, text)).config.devices[1].enabled is False
 
 
+TLS = "url: 'mqtts://h', tls: {"
+
+
 @pytest.mark.parametrize(
     ("mqtt", "expected"),
     [
@@ -198,6 +203,9 @@ def test_disabled_device_may_share_a_unit(tmp_path: Path) -> None:
         ("{base_topic: 'a/#'}", "mqtt.base_topic: a topic prefix cannot contain"),
         ("{password: a, password_env: B}", "mqtt: give one of password"),
         ("{password_file: /nonexistent/pw}", "mqtt.password_file: no such file"),
+        (f"{{{TLS} ca: /nonexistent/ca.pem}}}}", "mqtt.tls.ca: no such file '/nonexistent/ca"),
+        (f"{{{TLS} cert: ca.pem, key: nokey.pem}}}}", "mqtt.tls.key: no such file"),
+        (f"{{{TLS} key: ca.pem}}}}", "mqtt.tls.key: a key goes with its certificate"),
         ("{qos: 3}", "mqtt.qos: Input should be 0, 1 or 2"),
         # what run cannot do, refused by check (issue 11 item 13)
         ("{base_topic: $SYS/modbus}", "mqtt.base_topic: topics starting with '$'"),
@@ -314,6 +322,32 @@ def test_device_password_errors_never_show_it(tmp_path: Path, fields: str, expec
     rows = issues(tmp_path, DRIVE % fields)
     assert any(row.startswith(expected) for row in rows), rows
     assert not any("secret" in row or "70000" in row for row in rows), rows
+
+
+def test_files_a_config_names_are_relative_to_its_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A service often runs in ``/``: ``secrets/pw`` is found beside the config, as a
+    mapping path is, whatever the working directory."""
+    (tmp_path / "secrets").mkdir()
+    (tmp_path / "secrets" / "pw").write_text("s3cret\n")
+    (tmp_path / "secrets" / "p2").write_text("1234\n")
+    (tmp_path / "secrets" / "web").write_text("w" * 20 + "\n")
+    text = (
+        BASE.replace(
+            "buses:",
+            "mqtt: {url: 'mqtts://h', password_file: secrets/pw, tls: {ca: ca.pem}}\nbuses:",
+        )
+        + "bridge: {web: {enabled: true, token_file: secrets/web}}\n"
+    )
+    path = write(tmp_path, text)
+    monkeypatch.chdir("/")
+    config = load_config(path.relative_to("/")).config  # a relative path from /
+    assert config.mqtt.password_file == tmp_path / "secrets" / "pw"
+    assert config.mqtt.password_value() == "s3cret"
+    assert config.bridge.web.token_file == tmp_path / "secrets" / "web"
+    drive = load_config(write(tmp_path, DRIVE % "password_file: secrets/p2")).config.devices[0]
+    assert drive.password_value() == "1234"
 
 
 def test_a_password_file_that_is_not_text_is_no_password(tmp_path: Path) -> None:
