@@ -36,7 +36,7 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
-from bridge.core.discovery_entity import shown_readings
+from bridge.core.discovery_entity import admitted, shown_readings
 from bridge.core.entity import PollClass
 from bridge.core.topics import Topics
 from bridge.errors import MissingDataError
@@ -68,10 +68,12 @@ class DiscoveryPublisher:
 
     def stale(self, poller: DevicePoller, keys: set[str]) -> bool:
         """True when the device's payload changes with these keys: a unit or limit source,
-        or a reading Home Assistant would drop that the payload sent does not admit."""
+        or a reading Home Assistant would drop that the payload sent does not admit (a
+        reading back inside its range keeps the wider payload until the next full one)."""
         if keys & self.sources(poller):
             return True
-        return self._shown(poller) != self._readings.get(poller.device.id, {})
+        sent = self._readings.get(poller.device.id, {})
+        return not admitted(poller.points, sent, self._shown(poller), poller.image)
 
     @staticmethod
     def _shown(poller: DevicePoller) -> dict[str, Value]:

@@ -19,7 +19,7 @@ import re
 from collections.abc import Callable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeGuard
 
 from bridge.core.codec import (
     COMMAND_OFF,
@@ -170,24 +170,60 @@ def shown_readings(
     return shown
 
 
-def _beyond(point: Point, value: Value, image: Image) -> bool:
+def admitted(
+    points: AnyMapping[str, Point],
+    sent: AnyMapping[str, Value],
+    shown: AnyMapping[str, Value],
+    image: Image,
+) -> bool:
+    """True when a payload built with the readings ``sent`` shows every reading of
+    ``shown`` too: the same unknown code, or a number inside the range the reading sent
+    widened (a setting that wanders below its limits needs no new payload per poll)."""
+    for key, value in shown.items():
+        if key not in sent:
+            return False
+        if value == sent[key]:
+            continue
+        point, before = points.get(key), sent[key]
+        if point is None or not _widened_to(point, before, value, image):
+            return False
+    return True
+
+
+def _widened_to(point: Point, before: Value, value: Value, image: Image) -> bool:
+    """``value`` lies in the range the reading ``before`` widened (both numbers)."""
+    if not (_is_number(before) and _is_number(value)):
+        return False
+    low, high = _bounds(point, image)
+    low = before if low is None else min(low, before)
+    high = before if high is None else max(high, before)
+    return low <= value <= high
+
+
+def _is_number(value: Value) -> TypeGuard[int | float]:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _bounds(point: Point, image: Image) -> tuple[float | None, float | None]:
+    """The range a writable number is offered in: its limits (read, else the mapping's),
+    none below ``dangerous_below``."""
     entity = point.entity
-    if not entity.writable or entity.kind != "number":
-        return False
-    if not isinstance(value, int | float) or isinstance(value, bool):
-        return False
     try:
         low, high = limits_of(point, image)
     except MissingDataError:
         low, high = entity.min, entity.max
     floor = entity.dangerous_below
-    return any(
-        (
-            low is not None and value < low,
-            high is not None and value > high,
-            floor is not None and value < floor,
-        )
-    )
+    if floor is not None:
+        low = floor if low is None else max(low, floor)
+    return low, high
+
+
+def _beyond(point: Point, value: Value, image: Image) -> bool:
+    entity = point.entity
+    if not entity.writable or entity.kind != "number" or not _is_number(value):
+        return False
+    low, high = _bounds(point, image)
+    return (low is not None and value < low) or (high is not None and value > high)
 
 
 # --- read-only platforms ---------------------------------------------------------------

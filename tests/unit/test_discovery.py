@@ -28,7 +28,7 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
-from bridge.core.discovery_entity import shown_readings
+from bridge.core.discovery_entity import admitted, shown_readings
 from bridge.core.entity import Table
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, build_health_report
 from bridge.core.mapping import Mapping, builtin_mapping_names, builtin_mapping_path, load_mapping
@@ -901,3 +901,25 @@ def test_shown_readings_are_the_values_home_assistant_would_drop() -> None:
     assert shown_readings(points, values, image) == {"mode": "code_4"}
     del image[(Table.HOLDING, 1)]  # the limit register not read yet: the static limits
     assert shown_readings(points, values | {"freq": 10}, image) == {"mode": "code_4"}
+
+
+def test_a_payload_admits_the_readings_inside_the_range_its_reading_widened() -> None:
+    """A setting read below its limits widened the range sent: readings between it and the
+    limits need no new payload; one further out, or a new unknown code, does."""
+    entities = {
+        "ramp": {"name": "Ramp", "address": 0, "access": "rw", "min": 1, "max": 300},
+        "ref": {"name": "Ref", "address": 1, "access": "rw", "type": "s16", "max": 50,
+                "dangerous_below": 0},
+        "mode": {"name": "Mode", "address": 2, "enum": {0: "a"}},
+    }  # fmt: skip
+    points = make_mapping(entities).points()
+    image = {(Table.HOLDING, a): 0 for a in range(3)}
+    sent = {"ramp": 0, "ref": -10, "mode": "code_4"}
+    assert admitted(points, sent, sent, image)
+    assert admitted(points, sent, {"ref": -3}, image)  # back towards the floor
+    assert admitted(points, sent, {}, image)  # back in range: the wider payload still shows it
+    assert not admitted(points, sent, {"ref": -11}, image)  # further out
+    assert not admitted(points, sent, {"ramp": 301}, image)  # out on the other side
+    assert not admitted(points, sent, {"mode": "code_5"}, image)  # another unknown code
+    assert not admitted(points, {}, {"ramp": 0}, image)  # nothing widened yet
+    assert not admitted(points, sent, {"status": "code_4"}, image)  # not sent for status
