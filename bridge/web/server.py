@@ -121,13 +121,20 @@ class WebApp:
 
     def _static(self, request: Request) -> Response:
         if request.path in ("/", "/index.html"):
-            base = request.headers.get("x-ingress-path", "")
-            base = base if _INGRESS_PATH.match(base) and ".." not in base else ""
-            html = self.static.index.replace('<base href="./">', f'<base href="{base or "."}/">')
+            base = self._ingress_path(request) or "."
+            html = self.static.index.replace('<base href="./">', f'<base href="{base}/">')
             return Response(200, html.encode("utf-8"), "text/html; charset=utf-8")
         if request.path in STATIC:
             return Response(200, self.static.files[request.path], STATIC[request.path])
         return _error(HTTPStatus.NOT_FOUND, "no such page")
+
+    def _ingress_path(self, request: Request) -> str | None:
+        """The page's path behind Home Assistant's ingress (``X-Ingress-Path``), taken only
+        from the ingress proxy and only when it is a plain path."""
+        base = request.headers.get("x-ingress-path", "")
+        if not self.access.from_proxy(request) or not _INGRESS_PATH.match(base):
+            return None
+        return None if ".." in base else base
 
     def _login(self, request: Request) -> Response:
         if request.method != "POST":
@@ -138,9 +145,7 @@ class WebApp:
         given = _json_object(request.body).get("token")
         if not isinstance(given, str) or not self.access.login(given):
             return _error(HTTPStatus.UNAUTHORIZED, "wrong token")
-        base = request.headers.get("x-ingress-path", "")
-        path = base if _INGRESS_PATH.match(base) and ".." not in base else "/"
-        cookie = self.access.cookie_header(path)
+        cookie = self.access.cookie_header(self._ingress_path(request) or "/")
         return Response(200, b'{"status": "ok"}', _JSON, (cookie,))
 
     # --- reading ----------------------------------------------------------------------

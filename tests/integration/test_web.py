@@ -260,16 +260,20 @@ async def test_requests_from_other_sites_are_refused(mosquitto: Broker, tmp_path
 @pytest.mark.asyncio
 async def test_home_assistant_ingress(mosquitto: Broker, tmp_path: Path) -> None:
     """The ingress proxy (here 127.0.0.2) needs no token; everyone else does; the page's
-    base follows X-Ingress-Path."""
+    base follows X-Ingress-Path, from the proxy only."""
     async with site(mosquitto, tmp_path, token=TOKEN, ingress_proxies=["127.0.0.2"]) as s:
         proxied = await http(s.port, "GET", "/api/overview", source="127.0.0.2")
         assert proxied.status == 200
         assert (await http(s.port, "GET", "/api/overview", source="127.0.0.1")).status == 401
         prefix = "/api/hassio_ingress/Zx_9-abc"
-        page = await http(s.port, "GET", "/", headers={"X-Ingress-Path": prefix})
+        ingress = {"X-Ingress-Path": prefix}
+        page = await http(s.port, "GET", "/", headers=ingress, source="127.0.0.2")
         assert f'<base href="{prefix}/">'.encode() in page.body
+        page = await http(s.port, "GET", "/", headers=ingress, source="127.0.0.1")
+        assert b'<base href="./">' in page.body  # not the proxy: its header is not taken
         for hostile in ('/x"><script>alert(1)</script>', "//evil.example", "/a/../b", "x"):
-            page = await http(s.port, "GET", "/", headers={"X-Ingress-Path": hostile})
+            headers = {"X-Ingress-Path": hostile}
+            page = await http(s.port, "GET", "/", headers=headers, source="127.0.0.2")
             assert b'<base href="./">' in page.body, hostile
         scan = {"units": "1", "transaction": 7}
         headers = {"Origin": "http://homeassistant.local:8123"}  # HA's origin, not ours
