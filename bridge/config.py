@@ -61,6 +61,12 @@ def _from_config_folder(path: Path, info: ValidationInfo) -> Path:
     return path if base is None or path.is_absolute() else base / path
 
 
+def _one_source(name: str, *given: object) -> None:
+    """At most one of ``<name>``, ``<name>_file``, ``<name>_env`` is given."""
+    if sum(value is not None for value in given) > 1:
+        raise ValueError(f"give one of {name}, {name}_file, {name}_env")
+
+
 FilePath = Annotated[Path, AfterValidator(_from_config_folder)]
 """A file a config names (a secret, a certificate); relative to the config file."""
 
@@ -179,9 +185,7 @@ class MqttConfig(_Strict):
 
     @model_validator(mode="after")
     def _one_password_source(self) -> Self:
-        given = [self.password, self.password_file, self.password_env]
-        if sum(value is not None for value in given) > 1:
-            raise ValueError("give one of password, password_file, password_env")
+        _one_source("password", self.password, self.password_file, self.password_env)
         return self
 
     @property
@@ -282,9 +286,7 @@ class DeviceConfig(_Strict):
 
     @model_validator(mode="after")
     def _one_password_source(self) -> Self:
-        given = [self.password, self.password_file, self.password_env]
-        if sum(value is not None for value in given) > 1:
-            raise ValueError("give one of password, password_file, password_env")
+        _one_source("password", self.password, self.password_file, self.password_env)
         return self
 
     @property
@@ -336,8 +338,7 @@ class WebConfig(_Strict):
     @model_validator(mode="after")
     def _token_beyond_loopback(self) -> Self:
         given = [self.token, self.token_file, self.token_env]
-        if sum(value is not None for value in given) > 1:
-            raise ValueError("give one of token, token_file, token_env")
+        _one_source("token", *given)
         if self.token is not None and len(self.token.get_secret_value().strip()) < MIN_TOKEN:
             raise ValueError(f"token: at least {MIN_TOKEN} characters (spaces do not count)")
         if self.enabled and not self.loopback and given == [None] * 3 and not self.ingress_proxies:
