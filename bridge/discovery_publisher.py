@@ -216,15 +216,23 @@ class DiscoveryPublisher:
         }
 
     def _ours(self, payload: bytes) -> bool:
+        """True when a retained config names a device of this bridge. Any client may
+        publish there, so a config of another shape (a device that is not an object,
+        identifiers that are not a list or a string, JSON nested too deeply) is not ours,
+        never an error."""
         try:
             data = json.loads(payload)
-        except ValueError:
+        except (ValueError, RecursionError):  # RecursionError: nested deeper than it follows
             return False
         if not isinstance(data, dict):
             return False
         device = data.get("device") or data.get("dev") or {}
+        if not isinstance(device, dict):
+            return False
         identifiers = device.get("identifiers") or device.get("ids") or []
         if isinstance(identifiers, str):
             identifiers = [identifiers]
+        if not isinstance(identifiers, list):
+            return False
         mark = f"{self.topics.base}_"
         return any(isinstance(i, str) and i.startswith(mark) for i in identifiers)
