@@ -13,7 +13,9 @@ with ``only=device_id`` just that device, and only when its payload changed; wit
 Those are found two ways: the retained configs under the discovery prefix that carry this
 bridge's identifiers, and the list of topics the last full publish recorded, retained on
 ``<base>/bridge/discovery``, which is read by its exact name: RabbitMQ sends no retained
-message to a subscription with a wildcard, so the first way finds nothing there.
+message to a subscription with a wildcard, so the first way finds nothing there. Any client
+may publish in both places: a config of another shape is not ours, and of the record only
+topics that can be published to count (``recorded_topics``), never an error.
 ``due(poller, changed)`` says whether a poll's changes call for ``publish(only=...)``: the
 device just became ready, a unit or a limit read from a register changed, or a value Home
 Assistant would drop (an enum code the mapping does not know, a number outside its range)
@@ -23,6 +25,7 @@ is not admitted by the payload sent (the payload admits what the device reads).
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import logging
 
@@ -42,9 +45,12 @@ from bridge.core.topics import Topics
 from bridge.errors import MissingDataError
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
-from bridge.mqtt import MqttClient
+from bridge.mqtt import MqttClient, MqttPublishError
 
 log = logging.getLogger(__name__)
+MAX_RECORDED = 20_000  # topics taken from a bridge/discovery record, at most
+MAX_RECORDED_BYTES = 4096  # a longer recorded topic is not one the bridge wrote
+_NOT_IN_TOPICS = ("+", "#", "\x00")  # wildcards and NUL: no publish topic holds them
 
 
 class DiscoveryPublisher:
@@ -194,26 +200,17 @@ class DiscoveryPublisher:
             found |= await client.retained(pattern, keep=lambda topic: topic not in current)
         stale = {t for t, payload in found.items() if payload and self._ours(payload)}
         recorded = await client.retained(self.topics.bridge_discovery)
-        stale |= self._recorded(recorded.get(self.topics.bridge_discovery, b""))
+        stale |= recorded_topics(recorded.get(self.topics.bridge_discovery, b""), prefix)
+        failed: list[MqttPublishError] = []
         for topic in sorted(stale - current):
             log.info("removing stale discovery config %s", topic)
             message = removal(topic)
-            await client.publish(message.topic, message.payload, retain=True)
-
-    def _recorded(self, payload: bytes) -> set[str]:
-        """The discovery config topics of a ``bridge/discovery`` record (others ignored)."""
-        try:
-            topics = json.loads(payload) if payload else []
-        except ValueError:
-            return set()
-        prefix = f"{self.topics.discovery_prefix}/"
-        if not isinstance(topics, list):
-            return set()
-        return {
-            t
-            for t in topics
-            if isinstance(t, str) and t.startswith(prefix) and t.endswith("/config")
-        }
+            try:
+                await client.publish(message.topic, message.payload, retain=True)
+            except MqttPublishError as exc:  # one topic: the others are still removed
+                failed.append(exc)
+        if failed:
+            log.warning("%d stale discovery config(s) not removed: %s", len(failed), failed[0])
 
     def _ours(self, payload: bytes) -> bool:
         """True when a retained config names a device of this bridge. Any client may
@@ -236,3 +233,28 @@ class DiscoveryPublisher:
             return False
         mark = f"{self.topics.base}_"
         return any(isinstance(i, str) and i.startswith(mark) for i in identifiers)
+
+
+def recorded_topics(payload: bytes, prefix: str) -> set[str]:
+    """The discovery config topics of a ``bridge/discovery`` record. Any client may
+    overwrite the record, so only what the bridge can publish an empty message to counts:
+    strings under ``prefix`` ending in ``/config``, without wildcards or NUL, UTF-8, at
+    most MAX_RECORDED_BYTES long; the first MAX_RECORDED of them."""
+    try:
+        topics = json.loads(payload) if payload else []
+    except (ValueError, RecursionError):
+        return set()
+    if not isinstance(topics, list):
+        return set()
+    return set(itertools.islice((t for t in topics if _removable(t, prefix)), MAX_RECORDED))
+
+
+def _removable(topic: object, prefix: str) -> bool:
+    if not isinstance(topic, str) or not topic.startswith(f"{prefix}/"):
+        return False
+    if not topic.endswith("/config") or any(c in topic for c in _NOT_IN_TOPICS):
+        return False
+    try:
+        return len(topic.encode()) <= MAX_RECORDED_BYTES
+    except UnicodeEncodeError:  # a lone surrogate
+        return False

@@ -14,6 +14,7 @@ import pytest
 
 from bridge.app import Bridge
 from bridge.config import load_config_data
+from bridge.discovery_publisher import MAX_RECORDED, recorded_topics
 from tests.integration.harness import cancel, eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import observing
@@ -70,3 +71,32 @@ async def test_a_config_whose_device_is_not_an_object_is_left_alone(mosquitto: B
     retained = await swept(mosquitto, foreign | {OLD: json.dumps(OURS)})
     assert retained[OLD] == b""
     assert {t: retained[t].decode() for t in foreign} == foreign
+
+
+NOT_PUBLISHABLE = [
+    "homeassistant/+/config",  # paho refuses wildcards in a publish topic
+    "homeassistant/device/#/config",
+    "homeassistant/device/nul\x00/config",  # mosquitto drops a client that sends NUL
+    "homeassistant/device/\ud800/config",  # a lone surrogate: not UTF-8
+    "homeassistant/device/" + "x" * 70_000 + "/config",  # beyond 65535 bytes
+    5,
+    None,
+    ["homeassistant/device/list/config"],
+]
+
+
+@pytest.mark.asyncio
+async def test_a_record_of_topics_that_cannot_be_published_is_skipped(mosquitto: Broker) -> None:
+    record = json.dumps([*NOT_PUBLISHABLE, OLD])
+    foreign = json.dumps({"device": {"identifiers": ["zigbee2mqtt_0x1"]}})
+    retained = await swept(mosquitto, {"modbus/bridge/discovery": record, OLD: foreign})
+    assert retained[OLD] == b""
+
+
+def test_a_record_gives_its_first_topics_only() -> None:
+    topics = [f"homeassistant/device/d{i}/config" for i in range(MAX_RECORDED + 10)]
+    found = recorded_topics(json.dumps(topics).encode(), "homeassistant")
+    assert found == set(topics[:MAX_RECORDED])
+    outside = ["homeassistantx/device/a/config", "homeassistant/device/a/state", "[" * 100_000]
+    assert recorded_topics(json.dumps(outside).encode(), "homeassistant") == set()
+    assert recorded_topics(b"[" * 100_000, "homeassistant") == set()
