@@ -10,12 +10,13 @@ anything refused or failing goes to ``<base>/<device>/error``. Handling one mess
 waits for a device or a broker round trip, and no exception from one message leaves the
 message loop. Home Assistant's ``online`` asks for one republish, half a second later
 (however many arrive meanwhile). At most ``MAX_REQUESTS`` management requests run at a time.
-Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
-optional metrics endpoint serves the same counters for the whole run, and the optional
-web page (bridge/web) shows the same values, health and refusals, fed by ``feed``. A clean
-stop (Ctrl-C, SIGTERM) sets every device's availability ``offline`` before
-``bridge/state`` goes ``offline``; the demo (``remove_on_stop``) empties every retained
-message it published.
+A subscription the broker refuses (an ACL) is logged, and the session goes on
+publishing without it. Each session publishes ``<base>/bridge/health`` every
+``bridge.health_interval``; the optional metrics endpoint serves the same counters for the
+whole run, and the optional web page (bridge/web) shows the same values, health and
+refusals, fed by ``feed``. A clean stop (Ctrl-C, SIGTERM) sets every device's availability
+``offline`` before ``bridge/state`` goes ``offline``; the demo (``remove_on_stop``) empties
+every retained message it published.
 """
 
 from __future__ import annotations
@@ -46,7 +47,14 @@ from bridge.errors import ValueRejectedError
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
-from bridge.mqtt import Message, MqttClient, MqttError, MqttPublishError, run_with_reconnect
+from bridge.mqtt import (
+    Message,
+    MqttClient,
+    MqttError,
+    MqttPublishError,
+    MqttRefusedError,
+    run_with_reconnect,
+)
 from bridge.web import WebFeed, serve_web
 
 log = logging.getLogger(__name__)
@@ -127,8 +135,17 @@ class Bridge:
         if self.remove_on_stop:
             client.goodbye = b""
         commands = (*topics.command_filters(), topics.bridge_requests)
-        await client.subscribe(*commands, qos=max(1, self.mqtt.qos), live_only=True)
-        await client.subscribe(topics.ha_status, qos=max(1, self.mqtt.qos))
+        qos = max(1, self.mqtt.qos)
+        try:
+            await client.subscribe(*commands, qos=qos, live_only=True)
+        except MqttRefusedError as exc:  # an ACL: publishing state still works
+            log.error("%s: commands will not work (filters: %s)", exc, ", ".join(commands))
+        try:
+            await client.subscribe(topics.ha_status, qos=qos)
+        except MqttRefusedError as exc:
+            log.warning(
+                "%s: Home Assistant's restarts go unnoticed (retained messages remain)", exc
+            )
         await self._publish_info(client)
         await self._publish_everything(client)  # values first: one burst, one round trip
         await self.discovery.publish(client, clear_stale=True)

@@ -45,7 +45,7 @@ from bridge.core.topics import Topics
 from bridge.errors import MissingDataError
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
-from bridge.mqtt import MqttClient, MqttPublishError
+from bridge.mqtt import MqttClient, MqttPublishError, MqttRefusedError
 
 log = logging.getLogger(__name__)
 MAX_RECORDED = 20_000  # topics taken from a bridge/discovery record, at most
@@ -66,6 +66,7 @@ class DiscoveryPublisher:
         self._health_interval = loaded.config.bridge.health_interval
         self._sent: dict[str, int] = {}  # device -> digest of its configs as sent
         self._readings: dict[str, dict[str, Value]] = {}  # the readings each payload admits
+        self._sweep_refused = False  # the broker refused the sweep's subscriptions (said once)
 
     def forget(self, device_id: str) -> None:
         """Build the device's discovery afresh next time (its mapping changed)."""
@@ -193,16 +194,18 @@ class DiscoveryPublisher:
         sent.update(m.topic for m in messages)
 
     async def _clear_stale(self, client: MqttClient, current: set[str]) -> None:
-        """Empty the retained configs this bridge published before but no longer produces."""
-        prefix = self.topics.discovery_prefix
-        found: dict[str, bytes] = {}
-        for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
-            found |= await client.retained(pattern, keep=lambda topic: topic not in current)
-        stale = {t for t, payload in found.items() if payload and self._ours(payload)}
-        recorded = await client.retained(self.topics.bridge_discovery)
-        stale |= recorded_topics(recorded.get(self.topics.bridge_discovery, b""), prefix)
+        """Empty the retained configs this bridge published before but no longer produces;
+        skipped, with a warning the first time, when the broker refuses the subscriptions
+        that find them (an ACL)."""
+        try:
+            stale = await self._stale(client, current)
+        except MqttRefusedError as exc:
+            level = logging.DEBUG if self._sweep_refused else logging.WARNING
+            self._sweep_refused = True
+            log.log(level, "%s: stale discovery configs are not removed", exc)
+            return
         failed: list[MqttPublishError] = []
-        for topic in sorted(stale - current):
+        for topic in sorted(stale):
             log.info("removing stale discovery config %s", topic)
             message = removal(topic)
             try:
@@ -211,6 +214,17 @@ class DiscoveryPublisher:
                 failed.append(exc)
         if failed:
             log.warning("%d stale discovery config(s) not removed: %s", len(failed), failed[0])
+
+    async def _stale(self, client: MqttClient, current: set[str]) -> set[str]:
+        """The configs to empty: retained ones of ours and recorded ones, not in ``current``."""
+        prefix = self.topics.discovery_prefix
+        found: dict[str, bytes] = {}
+        for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
+            found |= await client.retained(pattern, keep=lambda topic: topic not in current)
+        stale = {t for t, payload in found.items() if payload and self._ours(payload)}
+        recorded = await client.retained(self.topics.bridge_discovery)
+        stale |= recorded_topics(recorded.get(self.topics.bridge_discovery, b""), prefix)
+        return stale - current
 
     def _ours(self, payload: bytes) -> bool:
         """True when a retained config names a device of this bridge. Any client may

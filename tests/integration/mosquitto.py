@@ -3,12 +3,16 @@
 ``Broker.start()`` writes a config into its own folder and waits (bounded) until the port
 accepts connections; ``restart()`` stops and starts it on the same port. Variants: a
 password file (``users``) and TLS (``tls``, certificates made by ``make_tls_files`` with
-the openssl CLI, optionally requiring a client certificate).
+the openssl CLI, optionally requiring a client certificate), an ACL file (``acl``: it
+filters what clients publish and receive but never refuses a SUBSCRIBE) and the dynamic
+security plugin (``subscribe_acl``: anonymous clients may subscribe only as it allows,
+others get SUBACK 0x87, 0x80 on 3.1.1).
 """
 
 from __future__ import annotations
 
 import getpass
+import json
 import os
 import shutil
 import socket
@@ -18,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 MOSQUITTO = "/usr/sbin/mosquitto"
+DYNSEC = "/usr/lib/x86_64-linux-gnu/mosquitto_dynamic_security.so"
 HOST = "127.0.0.1"
 
 
@@ -40,6 +45,9 @@ class Broker:
     tls: TlsFiles | None = None
     require_certificate: bool = False
     acl: list[str] = field(default_factory=list)  # acl_file lines (anonymous clients)
+    # dynamic security ACLs of anonymous clients ({"acltype": "subscribeLiteral", "topic":
+    # ..., "allow": True}); when given, any other subscription is refused
+    subscribe_acl: list[dict[str, object]] | None = None
     host: str = HOST
     port: int = 0
     process: subprocess.Popen[bytes] | None = None
@@ -117,6 +125,8 @@ class Broker:
             acl = self.workdir / "acl"
             acl.write_text("\n".join(self.acl) + "\n")
             lines.append(f"acl_file {acl}")
+        if self.subscribe_acl is not None:
+            lines += [f"plugin {DYNSEC}", f"plugin_opt_config_file {self._dynsec_file()}"]
         if self.tls:
             lines += [
                 f"cafile {self.tls.ca}",
@@ -125,6 +135,19 @@ class Broker:
                 f"require_certificate {'true' if self.require_certificate else 'false'}",
             ]
         return "\n".join(lines) + "\n"
+
+    def _dynsec_file(self) -> Path:
+        path = self.workdir / "dynamic-security.json"
+        access = {"publishClientSend": True, "publishClientReceive": True, "unsubscribe": True}
+        document = {
+            "defaultACLAccess": access | {"subscribe": False},
+            "clients": [],
+            "groups": [{"groupname": "anonymous", "roles": [{"rolename": "anonymous"}]}],
+            "roles": [{"rolename": "anonymous", "acls": self.subscribe_acl}],
+            "anonymousGroup": "anonymous",
+        }
+        path.write_text(json.dumps(document))
+        return path
 
     def _password_file(self) -> Path:
         path = self.workdir / "passwd"
@@ -140,6 +163,10 @@ class Broker:
 
 def has_mosquitto() -> bool:
     return os.access(MOSQUITTO, os.X_OK)
+
+
+def has_dynamic_security() -> bool:
+    return has_mosquitto() and os.path.exists(DYNSEC)
 
 
 def has_mosquitto_passwd() -> bool:

@@ -1,5 +1,6 @@
 """What a broker answers never ends the bridge (issue 11, item 13): refused publishes are
-logged once per topic; a broker that breaks the protocol ends the session, not the process.
+logged once per topic; refused subscriptions are logged and the bridge goes on publishing;
+a broker that breaks the protocol ends the session, not the process.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ import pytest
 from bridge.app import Bridge
 from bridge.config import load_config_data
 from tests.integration.harness import cancel, eventually
-from tests.integration.mosquitto import Broker, has_mosquitto
-from tests.integration.test_bridge import all_units, observing
+from tests.integration.mosquitto import Broker, has_dynamic_security, has_mosquitto
+from tests.integration.test_bridge import SEEDS, all_units, observing
 from tests.integration.test_mqtt_client import read_packet
 from tests.integration.test_safety import all_online, bridged, raw_client
 
@@ -136,3 +137,66 @@ async def test_a_broker_breaking_the_protocol_ends_the_session_not_the_bridge() 
             assert not task.done(), task.exception()
         finally:
             await cancel(task)
+
+
+# --- a broker that refuses the bridge's subscriptions ---------------------------------------
+
+
+def allowed(kind: str, *topics: str) -> list[dict[str, object]]:
+    return [{"acltype": kind, "topic": topic, "allow": True} for topic in topics]
+
+
+COMMANDS = ("modbus/+/set", "modbus/+/+/set", "modbus/+/get", "modbus/bridge/request/#")
+SWEEP = ("homeassistant/device/+/config", "homeassistant/+/+/+/config")
+HA_STATUS = "homeassistant/status"
+REFUSED = {  # what is refused: what else is allowed, the level and words the bridge says it in
+    "commands": (
+        allowed("subscribePattern", "homeassistant/#"),
+        logging.ERROR,
+        "commands will not work",
+    ),
+    "discovery": (
+        allowed("subscribeLiteral", *COMMANDS, HA_STATUS),
+        logging.WARNING,
+        "stale discovery configs are not removed",
+    ),
+    "home assistant status": (
+        allowed("subscribeLiteral", *COMMANDS, *SWEEP),
+        logging.WARNING,
+        "Home Assistant's restarts go unnoticed",
+    ),
+}
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("refused", list(REFUSED))
+async def test_a_refused_subscription_is_said_and_the_bridge_goes_on_publishing(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, refused: str
+) -> None:
+    """The dynamic security plugin refuses the SUBSCRIBE (an acl_file never does)."""
+    if not has_dynamic_security():
+        pytest.skip("no mosquitto with its dynamic security plugin")
+    more, level, said = REFUSED[refused]
+    common = allowed("subscribeLiteral", "modbus/#", "modbus/bridge/discovery")
+    broker = Broker(tmp_path, subscribe_acl=common + more)
+    broker.start()
+    try:
+        with caplog.at_level(logging.WARNING, logger="bridge"):
+            async with (
+                observing(broker, "modbus/#") as observer,
+                bridged(broker, all_units()) as (
+                    _,
+                    task,
+                ),
+            ):
+                online = f"modbus/{SEEDS[0]}/availability"
+                await eventually(
+                    lambda: observer.retained.get(online) == b"online" or task.done(), timeout=20
+                )
+                assert not task.done(), task.exception()
+    finally:
+        broker.stop()
+    records = [r for r in caplog.records if said in r.getMessage()]
+    assert [r.levelno for r in records] == [level]
+    if refused == "commands":
+        assert all(f in records[0].getMessage() for f in COMMANDS)
