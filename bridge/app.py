@@ -43,7 +43,7 @@ from bridge.core.state import compact, plain_payload, published, state_document
 from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
-from bridge.errors import ValueRejectedError
+from bridge.errors import ValueRejectedError, first_of
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
@@ -157,8 +157,8 @@ class Bridge:
                 group.create_task(self._health_reports(client))
                 async for message in client.messages():
                     self._handle(message)
-        except ExceptionGroup as failed:
-            raise _first(failed) from None
+        except ExceptionGroup as failed:  # the MQTT error, so the reconnect loop sees it
+            raise first_of(failed, MqttError) or failed from None
 
     def _farewell(self, client: MqttClient) -> list[tuple[str, str]]:
         """What a clean stop publishes before ``bridge/state`` goes offline: each device
@@ -423,13 +423,3 @@ async def _guarded(work: Any, failed: Callable[[str], None] | None) -> None:
 
 def _availability_word(online: bool | None) -> str:
     return "unknown" if online is None else "online" if online else "offline"
-
-
-def _first(failed: ExceptionGroup[Exception]) -> Exception:
-    """The MQTT error that ended a session (so the reconnect loop sees it), else the group."""
-    for exc in failed.exceptions:
-        if isinstance(exc, ExceptionGroup):
-            return _first(exc)
-        if isinstance(exc, MqttError):
-            return exc
-    return failed

@@ -26,7 +26,7 @@ from bridge.core.mapping import (
     mapping_schema,
     resolve_mapping_path,
 )
-from bridge.errors import InputError
+from bridge.errors import BridgeError, InputError, first_of
 from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 
 EXIT_OK = 0
@@ -133,7 +133,14 @@ def _run(args: argparse.Namespace, _: TextIO) -> int:
 
     loaded = load_config(args.config)
     configure_logging(args.log_level, args.log_format)
-    asyncio.run(until_stopped(Bridge(loaded).run()))
+    try:
+        asyncio.run(until_stopped(Bridge(loaded).run()))
+    except ExceptionGroup as failed:  # the bridge's task groups wrap what ended it
+        reason = first_of(failed, BridgeError)
+        if reason is None:
+            raise
+        print(f"error: {reason}", file=sys.stderr)
+        return EXIT_INVALID if isinstance(reason, InputError) else EXIT_FAILED
     return EXIT_OK
 
 

@@ -25,7 +25,7 @@ from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.demo_control import FAULT_REQUEST, fault_request
 from bridge.demo_view import DemoView, mosquitto_options, render_plain, render_table
-from bridge.errors import BridgeError, ConfigError, InputError
+from bridge.errors import BridgeError, ConfigError, InputError, first_of
 from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.mqtt import MqttConnectError
@@ -129,7 +129,7 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
     try:
         asyncio.run(until_stopped(demo(args, out)))
     except ExceptionGroup as failed:
-        reason = _bridge_error(failed)
+        reason = first_of(failed, BridgeError)
         if reason is None:
             raise
         print(f"error: {reason}", file=sys.stderr)
@@ -137,15 +137,6 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
     gone = "kept on the broker (--keep)" if args.keep else "removed from the broker"
     print(f"demo stopped; its devices were {gone}", file=out, flush=True)
     return 0
-
-
-def _bridge_error(group: ExceptionGroup[Exception]) -> BridgeError | None:
-    """The first deliberate error (e.g. no broker) inside a task group's failure."""
-    for exc in group.exceptions:
-        found = _bridge_error(exc) if isinstance(exc, ExceptionGroup) else exc
-        if isinstance(found, BridgeError):
-            return found
-    return None
 
 
 async def demo(args: argparse.Namespace, out: TextIO) -> None:
@@ -184,16 +175,12 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
                     show = _show_plain if args.plain or not out.isatty() else _show_live
                     await show(view, out)
             except* MqttConnectError as failed:
-                raise DemoBrokerError(_advice(_first_leaf(failed), broker)) from None
+                failure = first_of(failed, MqttConnectError) or failed
+                raise DemoBrokerError(_advice(failure, broker)) from None
 
 
 class DemoBrokerError(BridgeError):
     """The broker the demo chose cannot be used (unreachable, login refused)."""
-
-
-def _first_leaf(group: BaseExceptionGroup[Exception]) -> Exception:
-    first = group.exceptions[0]
-    return _first_leaf(first) if isinstance(first, BaseExceptionGroup) else first
 
 
 def _how(broker: BrokerChoice, mqtt: MqttConfig) -> str:

@@ -23,12 +23,26 @@
                                 frames done were undone; ``cause`` is the failure
 
 Every error carries a message a user can act on; none is raised for a device fault
-(devices report through health counters, never by stopping the bridge).
+(devices report through health counters, never by stopping the bridge). Task groups wrap
+what ended them in (nested) ExceptionGroups: ``first_of`` finds the error inside.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TypeVar
+
+_E = TypeVar("_E", bound=BaseException)
+
+
+def first_of(group: BaseExceptionGroup[BaseException], kind: type[_E]) -> _E | None:
+    """The first exception of type ``kind`` in ``group`` (nested groups searched in
+    order), else None."""
+    for exc in group.exceptions:
+        found = first_of(exc, kind) if isinstance(exc, BaseExceptionGroup) else exc
+        if isinstance(found, kind):
+            return found
+    return None
 
 
 class BridgeError(Exception):

@@ -9,8 +9,11 @@ from pathlib import Path
 
 import pytest
 
+from bridge import cli
+from bridge.app import Bridge
 from bridge.cli import main
 from bridge.core.mapping import builtin_mapping_names
+from bridge.mqtt import MqttPublishError
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "config.yaml"  # the five seed devices on the simulator
@@ -142,3 +145,20 @@ def test_a_missing_mapping_file_is_named_where_it_was_looked_for(tmp_path: Path)
         (ROOT / "examples" / "mappings" / "temperature_controller.yaml").read_text()
     )
     assert run("check", "-c", str(config)).returncode == 0
+
+
+def test_run_says_a_bridge_error_that_ended_it_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The bridge's TaskGroups wrap what ended it in (nested) ExceptionGroups: ``run``
+    prints the bridge's own error as ``error: ...`` and exits 1, no traceback. Bridge.run
+    stands in for a bridge that ended so (the thing under test is the command line)."""
+
+    async def ended(_: Bridge) -> None:
+        refused = MqttPublishError("cannot publish to x: too long")
+        raise ExceptionGroup("bridge", [ExceptionGroup("session", [ValueError(), refused])])
+
+    monkeypatch.setattr(Bridge, "run", ended)
+    monkeypatch.setattr(cli, "configure_logging", lambda *_: None)  # pytest keeps its handlers
+    assert main(["run", "-c", str(EXAMPLE)]) == 1
+    assert capsys.readouterr().err == "error: cannot publish to x: too long\n"
