@@ -7,8 +7,9 @@ does), sets the Last Will ``offline`` (retained, QoS 1) on the will topic and
 publishes ``online`` there; leaving cleanly (the session returned or was cancelled: a
 stop) publishes the caller's ``farewell`` messages (retained: devices going offline, or
 empty payloads that remove what the session published, ``retained_topics``), then
-``goodbye`` on the will topic (``offline``; empty removes it), within ``FAREWELL_TIMEOUT``
-seconds, and disconnects. Incoming
+``goodbye`` on the will topic (``offline``; empty removes it), all at once, and disconnects
+once the broker acknowledged them all; if it did not within ``FAREWELL_TIMEOUT`` seconds,
+the socket is closed without DISCONNECT, so the broker publishes the will. Incoming
 messages are ``Message`` values, decoupled from paho. The caller owns the reconnect loop;
 ``run_with_reconnect`` is that loop, with a capped exponential backoff; once a broker
 needed the fallback, its reconnects ask for 3.1.1 at once.
@@ -37,6 +38,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import socket
 import ssl
 import time
@@ -296,30 +298,39 @@ class MqttClient:
         try:
             if stopping:
                 farewell = list(self.farewell()) if self.farewell is not None else []
-                await self._say_farewell(connection, farewell)
+                said = await self._say_farewell(connection, farewell)
             else:
                 await connection.publish(self._will_topic, OFFLINE, 1, True, timeout=_CLOSE_TIMEOUT)
-            await connection.__aexit__(exc_type, exc, tb)
+                said = True
+            if said:  # else no DISCONNECT: it would drop the will, the only word left
+                await connection.__aexit__(exc_type, exc, tb)
         except aiomqtt.MqttError as error:  # already lost: the broker publishes the will
             _log.debug("no clean MQTT disconnect: %s", error)
         finally:
-            connection.abort()  # no-op after a clean DISCONNECT; closes a stuck socket
+            connection.abort()  # no-op after a clean DISCONNECT; else the will goes out
 
-    async def _say_farewell(self, connection: _Connection, messages: list[tuple[str, str]]) -> None:
-        """The farewell messages, then the goodbye, within FAREWELL_TIMEOUT seconds."""
+    async def _say_farewell(self, connection: _Connection, messages: list[tuple[str, str]]) -> bool:
+        """The farewell messages and then the goodbye, sent at once and acknowledged
+        together within FAREWELL_TIMEOUT seconds; False if the goodbye was not."""
+        farewell: list[tuple[str, str | bytes]] = [*messages, (self._will_topic, self.goodbye)]
         try:
             async with asyncio.timeout(FAREWELL_TIMEOUT):
-                for topic, payload in messages:
-                    await connection.publish(topic, payload, 1, True, timeout=_CLOSE_TIMEOUT)
-                await connection.publish(
-                    self._will_topic, self.goodbye, 1, True, timeout=_CLOSE_TIMEOUT
+                results = await asyncio.gather(
+                    *(connection.publish(t, p, 1, True, timeout=math.inf) for t, p in farewell),
+                    return_exceptions=True,
                 )
         except TimeoutError:
             _log.warning(
-                "MQTT: the broker took over %gs for the last %d messages; not all were sent",
+                "MQTT: the broker did not acknowledge the last %d messages within %gs; "
+                "closing without DISCONNECT, so it publishes the will (offline)",
+                len(farewell),
                 FAREWELL_TIMEOUT,
-                len(messages) + 1,
             )
+            return False
+        failed = [r for r in results if isinstance(r, BaseException)]
+        if failed:
+            _log.debug("MQTT: %d of the last messages failed: %s", len(failed), failed[0])
+        return not isinstance(results[-1], BaseException) and not connection.lost
 
     def _require(self) -> _Connection:
         if self._connection is None:
