@@ -190,7 +190,7 @@ def _how(broker: BrokerChoice, mqtt: MqttConfig) -> str:
 
 def _advice(failure: Exception, broker: BrokerChoice) -> str:
     """Why the demo cannot use the broker, and what to do, said once."""
-    if isinstance(failure, MqttConnectError) and failure.code is not None:  # a CONNACK: login
+    if isinstance(failure, MqttConnectError) and failure.refused:  # the login
         hint = "log in with --username and --password-file or --password-env"
     elif broker.how == "given":
         hint = "check --mqtt-url, or leave it out to use a local or an embedded broker"

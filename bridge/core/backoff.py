@@ -34,8 +34,8 @@ class ReconnectBackoff:
 
     def failed(self, now: float, *, refused: bool = False) -> float:
         """An attempt failed or a session ended: the seconds to wait before the next one.
-        ``refused``: the broker answered and said no (CONNACK): backs off like an old
-        outage."""
+        ``refused``: the broker refused the login (CONNACK: bad user name or password,
+        not authorised, banned...): backs off like an old outage."""
         if self._connected_at is not None and now - self._connected_at >= self.good_session:
             self._delay, self._outage_since = 0.0, None  # after a good session: start over
         self._connected_at = None

@@ -578,7 +578,7 @@ async def run_with_reconnect(
             if first_connect_required and not ever_connected:
                 raise failure from None
             reason = str(failure)
-            refused = isinstance(failure, MqttConnectError) and failure.code is not None
+            refused = isinstance(failure, MqttConnectError) and failure.refused
         if connected and on_state is not None:
             on_state("offline")
         delay = backoff.failed(time.monotonic(), refused=refused)

@@ -7,7 +7,9 @@
         │   │                       broker refused the CONNECT (bad user name or password,
         │   │                       not authorised, protocol); ``code`` is the MQTT 5 CONNACK
         │   │                       reason code when the broker answered (3.1.1 codes are
-        │   │                       translated: 4 -> 134), else None
+        │   │                       translated: 4 -> 134), else None; ``refused``: the
+        │   │                       code refuses this client's login (LOGIN_REFUSED), not
+        │   │                       a passing state of the broker (busy, unavailable, quota)
         │   └── MqttUnansweredError the broker took the connection but sent no CONNACK in
         │                           time (or closed it): amqtt does so for MQTT 5
         ├── MqttDisconnectedError   an established session was lost (socket closed, keepalive
@@ -25,6 +27,11 @@ from __future__ import annotations
 
 from bridge.errors import BridgeError
 
+# CONNACK reason codes refusing the login or the client: 0x85 client identifier not valid,
+# 0x86 bad user name or password, 0x87 not authorised, 0x8A banned, 0x8C bad authentication
+# method (paho translates the 3.1.1 return codes 2, 4 and 5 to 0x85, 0x86 and 0x87)
+LOGIN_REFUSED = frozenset({0x85, 0x86, 0x87, 0x8A, 0x8C})
+
 
 class MqttError(BridgeError):
     """Talking to the MQTT broker did not succeed."""
@@ -36,6 +43,11 @@ class MqttConnectError(MqttError):
     def __init__(self, message: str, code: int | None = None) -> None:
         self.code = code
         super().__init__(message)
+
+    @property
+    def refused(self) -> bool:
+        """The broker refused this client's login; retrying soon will not change that."""
+        return self.code in LOGIN_REFUSED
 
 
 class MqttUnansweredError(MqttConnectError):

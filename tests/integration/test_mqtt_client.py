@@ -204,6 +204,28 @@ async def test_a_refused_login_backs_off_and_a_closed_port_retries_fast(
         assert set(backoff.kinds) == {refused}
 
 
+@pytest.mark.asyncio
+@pytest.mark.parametrize(("connack", "refused"), [(3, False), (5, True)])
+async def test_a_broker_that_is_unavailable_is_no_refused_login(
+    connack: int, refused: bool
+) -> None:
+    """CONNACK 3 (server unavailable) passes: the normal backoff; 5 (not authorised) is a
+    refused login: the long one."""
+
+    async def session(_: MqttClient) -> None:
+        raise AssertionError("never connected")
+
+    backoff = RecordingBackoff()
+    async with StubBroker(connack=connack) as url:
+        config = cfg(url, version="3.1.1")
+        loop = asyncio.ensure_future(run_with_reconnect(config, STATE, session, backoff=backoff))
+        await eventually(lambda: len(backoff.kinds) >= 2, timeout=10)
+        loop.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await loop
+    assert set(backoff.kinds) == {refused}
+
+
 # -- TLS --------------------------------------------------------------------------------
 
 
@@ -297,9 +319,15 @@ class StubBroker:
     """
 
     def __init__(
-        self, *, silent: bool = False, mqtt5: str = "refuse", dies_on: bytes | None = None
+        self,
+        *,
+        silent: bool = False,
+        mqtt5: str = "refuse",
+        dies_on: bytes | None = None,
+        connack: int = 0,
     ) -> None:
         self.silent = silent  # never answer CONNECT
+        self.connack = connack  # the return code to a 3.1.1 CONNECT (3: server unavailable)
         self.mqtt5 = mqtt5  # an MQTT 5 CONNECT: "refuse" it, "ignore" it (amqtt), "close"
         self.dies_on = dies_on  # a PUBLISH to this topic is never acknowledged: the link dies
         self.levels: list[int] = []
@@ -339,7 +367,10 @@ class StubBroker:
                     writer.write(b"\x20\x02\x00\x01")  # unacceptable protocol version
                     await writer.drain()
                     return
-                writer.write(b"\x20\x02\x00\x00")
+                writer.write(bytes([0x20, 2, 0, self.connack]))
+                if self.connack:
+                    await writer.drain()
+                    return
             elif kind == 0x30 and first & 0x06:  # PUBLISH QoS>0: PUBACK its id
                 topic_length = int.from_bytes(body[0:2])
                 if body[2 : 2 + topic_length] == self.dies_on:
