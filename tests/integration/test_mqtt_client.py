@@ -126,6 +126,18 @@ async def test_last_will_when_the_connection_dies(mosquitto: Broker) -> None:
 
 
 @pytest.mark.asyncio
+async def test_a_burst_longer_than_one_chunk_arrives_whole(mosquitto: Broker) -> None:
+    """publish_many waits for ``BURST`` acknowledgements at a time: every message of a
+    longer burst arrives, and the call returns when the last is acknowledged."""
+    count = 2 * client_module.BURST + 7
+    burst = [(f"t/burst/{i}", str(i), True) for i in range(count)]
+    async with MqttClient(cfg(mosquitto.url), will_topic=STATE) as client:
+        await client.publish_many(burst)
+        found = await client.retained("t/burst/+", settle=0.5)
+    assert found == {topic: payload.encode() for topic, payload, _ in burst}
+
+
+@pytest.mark.asyncio
 async def test_retained_returns_the_retained_set_then_unsubscribes(mosquitto: Broker) -> None:
     async with watcher(mosquitto.url) as other:
         for topic in ("ha/device/a/config", "ha/device/b/config", "ha/sensor/c/config"):
