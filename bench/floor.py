@@ -1,0 +1,153 @@
+"""The floors under issue 13's two unmet targets: what a process pays for the libraries
+this project is built on (pydantic, asyncio, pymodbus, paho/aiomqtt, PyYAML) before any of
+its own work.
+
+Memory: one fresh interpreter imports what ``run`` needs, one group after the other, and
+prints its RSS (``/proc/self/status``) after each; then the bridge's config and mapping
+models, a one-device config validated, and the rest of ``run``. Its ``VmHWM`` at the end
+is the peak of a ``run`` that has not polled yet.
+
+CPU: the peers workload of ``bench/peers.py`` (one Nastec VASCO, 40 registers one per
+request every second, 20 ms per transaction, the simulator behind its relay in its own
+process) read by a bare pymodbus client that does nothing with the values (the floor of
+any bridge on pymodbus), then by this bridge with its defaults (publishing to a private
+mosquitto). CPU is utime + stime of the process over the window.
+
+    .venv/bin/python bench/floor.py [--seconds 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the private broker of the tests
+
+from latency import NodelayBroker
+from peer_configs import UNIT, registers, write_configs
+from scale import cpu_seconds, listening, process
+
+from tests.integration.mosquitto import free_port
+
+BRIDGE = Path(sys.executable).with_name("modbus-mqtt-bridge")
+WARMUP = 5.0
+PERIOD = 1.0
+
+# Cumulative import steps of one interpreter: (label, statement). {config} is a path.
+STEPS = (
+    ("the interpreter", "pass"),
+    ("asyncio (it imports ssl, OpenSSL, whatever the broker)", "import asyncio"),
+    ("PyYAML (with libyaml)", "import yaml"),
+    ("pydantic and pydantic-core", "from pydantic import BaseModel, Field, SecretStr"),
+    ("pymodbus client", "import pymodbus.client"),
+    ("paho-mqtt and aiomqtt", "import aiomqtt"),
+    ("the bridge's config and mapping models", "import bridge.config, bridge.core.mapping"),
+    ("a one-device config validated", "bridge.config.load_config(Path({config!r}))"),
+    ("the rest of `run` (engine, MQTT edge, app)", "import bridge.app"),
+)
+LIBRARIES = 6  # the first six steps: the libraries alone
+
+CHILD = """
+import sys
+from pathlib import Path
+def kib(field):
+    for line in open('/proc/self/status'):
+        if line.startswith(field):
+            return int(line.split()[1])
+for statement in sys.argv[1:]:
+    exec(statement)
+    print(kib('VmRSS:'), flush=True)
+print(kib('VmHWM:'))
+"""
+
+CONFIG = """\
+mqtt: {{url: "mqtt://127.0.0.1:1"}}
+buses: [{{id: tcp, transport: tcp, host: 127.0.0.1, tcp_port: {port}}}]
+devices: [{{id: starter, bus: tcp, unit: 1, mapping: soft_starter}}]
+"""
+
+
+def memory(folder: Path) -> None:
+    config = folder / "memory.yaml"
+    config.write_text(CONFIG.format(port=free_port()))
+    statements = [s.format(config=str(config)) for _, s in STEPS]
+    out = subprocess.run(  # noqa: S603 - our own interpreter and statements
+        [sys.executable, "-c", CHILD, *statements], capture_output=True, text=True, check=True
+    ).stdout.split()
+    rss, hwm = [int(k) / 1024 for k in out[:-1]], int(out[-1]) / 1024
+    print("| what | RSS after, MiB | step, MiB |\n| --- | ---: | ---: |")
+    for i, ((label, _), after) in enumerate(zip(STEPS, rss, strict=True)):
+        step = f"+{after - rss[i - 1]:.1f}" if i else f"{after:.1f}"
+        print(f"| {label} | {after:.1f} | {step} |")
+        if i == LIBRARIES - 1:
+            print(f"| **the libraries alone** | **{after:.1f}** | |")
+    print(f"| peak (VmHWM) at the end | {hwm:.1f} | |\n")
+
+
+async def bare_client(port: int, seconds: float) -> None:
+    """The peers workload read by pymodbus alone, every register every second, until
+    ``seconds`` have passed; the values are dropped."""
+    from pymodbus.client import AsyncModbusTcpClient  # noqa: PLC0415 - the child's own
+
+    addresses = [r.address + word for r in registers() for word in range(r.words)]
+    client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=1, retries=0)
+    await client.connect()
+    end = time.monotonic() + seconds
+    tick = time.monotonic()
+    while (now := time.monotonic()) < end:
+        for address in addresses:  # one register per request, as the device demands
+            await client.read_holding_registers(address, count=1, device_id=UNIT)
+        tick += PERIOD
+        await asyncio.sleep(max(0.0, tick - now))
+    client.close()
+
+
+async def cpu_of(argv: list[str], log: Path, seconds: float) -> float:
+    """% of one core the process of ``argv`` takes over ``seconds`` after the warm-up."""
+    with process(argv, log) as child:
+        await asyncio.sleep(WARMUP)
+        before, start = cpu_seconds(child.pid), time.monotonic()
+        await asyncio.sleep(seconds)
+        return 100 * (cpu_seconds(child.pid) - before) / (time.monotonic() - start)
+
+
+async def cpu(folder: Path, seconds: float) -> None:
+    port, log = free_port(), folder / "requests.log"
+    serve = [sys.executable, str(Path(__file__).with_name("peers.py")), "serve", str(port)]
+    broker = NodelayBroker(folder)
+    broker.start()
+    try:
+        with process([*serve, "0.02", str(log)], folder / "device.log"):
+            await listening([port])
+            bare = [sys.executable, __file__, "client", str(port), str(seconds + WARMUP + 5)]
+            floor = await cpu_of(bare, folder / "client.log", seconds)
+            config = write_configs(folder, broker.url, port, [UNIT])["bridge"]
+            run = [str(BRIDGE), "run", "-c", str(config), "--log-level", "warning"]
+            ours = await cpu_of(run, folder / "bridge.log", seconds)
+    finally:
+        broker.stop()
+    reads = sum(r.words for r in registers())
+    print(f"| {reads} reads a second, {seconds:g} s window | CPU % of one core | per read, ms |")
+    print("| --- | ---: | ---: |")
+    for label, figure in (("pymodbus alone, values dropped", floor), ("this bridge", ours)):
+        print(f"| {label} | {figure:.2f} | {10 * figure / reads / PERIOD:.3f} |")
+
+
+async def main(seconds: float) -> None:
+    with tempfile.TemporaryDirectory() as name:
+        memory(Path(name))
+        await cpu(Path(name), seconds)
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["client"]:
+        asyncio.run(bare_client(int(sys.argv[2]), float(sys.argv[3])))
+    else:
+        parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+        parser.add_argument("--seconds", type=float, default=30.0)
+        asyncio.run(main(parser.parse_args().seconds))
