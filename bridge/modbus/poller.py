@@ -5,7 +5,9 @@ decode what was read fresh -> ``on_update`` with the values that changed. Missed
 skipped, not queued. An offline device is probed once per backoff interval only.
 
 Writes go through the device's ``DeviceWriter`` (bridge/modbus/writer.py), which uses the
-poller's scheduler access (``submit``, ``read_block``), image, values and ``publish``.
+poller's scheduler access (``submit``, ``read_block``), image, values and ``publish``;
+blocks the device refuses are searched and learnt by its ``RefusalLearner``
+(bridge/modbus/refusal_learning.py).
 """
 
 from __future__ import annotations
@@ -21,11 +23,10 @@ from bridge.core.codec import Value, decode, is_unknown_code
 from bridge.core.entity import PollClass, Table
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.health import DeviceHealth, Fault, HealthPolicy, Outcome, Transition
-from bridge.core.mapping import Mapping, Point, printed_address
+from bridge.core.mapping import Mapping, Point
 from bridge.core.planner import ReadLimits, addresses_of, limits_for, plan_reads
 from bridge.core.protocol import Protocol
-from bridge.core.refusal import Refusal, refusal_search
-from bridge.core.refusal_memory import RefusalMemory, Verdict
+from bridge.core.refusal_memory import RefusalMemory
 from bridge.core.request import Read, Write, WriteSequence
 from bridge.core.timing import LinkTiming
 from bridge.core.watchdog import Watchdog
@@ -38,6 +39,7 @@ from bridge.errors import (
     ModbusError,
 )
 from bridge.modbus.keepalive import keep_alive
+from bridge.modbus.refusal_learning import RefusalLearner, Refused
 from bridge.modbus.scheduler import BusScheduler, Priority
 from bridge.modbus.tear_check import check_torn
 from bridge.modbus.unlock import Unlocker
@@ -46,7 +48,6 @@ from bridge.modbus.writer import DeviceWriter, WriteCounters
 log = logging.getLogger(__name__)
 DEFAULT_POLICY = HealthPolicy()
 Address = tuple[Table, int]
-Refused = tuple[Read, DeviceExceptionError]  # a block refused whole, with the refusal
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +90,7 @@ class DevicePoller:
         self.on_update = on_update
         self.health = DeviceHealth(policy)
         self.writer = DeviceWriter(self)
+        self.learner = RefusalLearner(self)
         self.unlocker = Unlocker(device, self.protocol)
         keepalive = self.protocol.keepalive
         self.watchdog = Watchdog(keepalive.interval) if keepalive is not None else None
@@ -172,7 +174,7 @@ class DevicePoller:
     async def poll(self, classes: Iterable[PollClass]) -> None:
         """Read every point of these classes once and publish what changed."""
         chosen = set(classes)
-        self._recheck_refusals()
+        self.learner.recheck()
         fresh: set[Address] = set()
         plan = self._plan(chosen)
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
@@ -215,7 +217,7 @@ class DevicePoller:
             )
         return self._limits_cache
 
-    def _forget_plans(self) -> None:
+    def forget_plans(self) -> None:
         self._plans.clear()
         self._limits_cache = None
 
@@ -234,7 +236,7 @@ class DevicePoller:
                 return  # silent: the refused blocks are judged another time
             if self.health.online is False:
                 break  # probing an offline unit: one failed read settles it
-        await self._judge_refusals(refused, priority, fresh)
+        await self.learner.judge(refused, priority, fresh)
 
     async def read_block(
         self,
@@ -253,117 +255,20 @@ class DevicePoller:
             if refused is not None:
                 refused.append((read, exc))
                 return False
-            return await self._judge_refusals([(read, exc)], priority, fresh)
+            return await self.learner.judge([(read, exc)], priority, fresh)
         except ModbusError:
             return False
-        self._keep(read, values, fresh)
+        self.keep(read, values, fresh)
         return True
 
-    async def _judge_refusals(
-        self, refused: list[Refused], priority: Priority, fresh: set[Address]
-    ) -> bool:
-        """Search the blocks refused whole and learn their holes, unless the device refuses
-        what it answered before or everything (bridge/core/refusal_memory.py): then it is a
-        failure towards offline and nothing is learnt. True if any part answered."""
-        if not refused:
-            return False
-        verdict = self.refusals.judge(len(fresh), [addresses_of(r) for r, _ in refused])
-        if verdict is Verdict.FAULT:
-            self._refused_everything()
-            return False
-        alive, answered = verdict is Verdict.LEARN, False
-        for read, exc in sorted(refused, key=lambda item: item[0].count):
-            some, refusal = await self._search_refused(read, priority, fresh)
-            if refusal is None:
-                return answered  # the device stopped answering meanwhile: learn next time
-            answered = answered or some
-            alive = alive or some
-            if not alive and not self.refusals.explains(refusal.refused):
-                self._refused_everything()
-                return answered
-            self._remember(refusal, exc)
-        return answered
-
-    async def _search_refused(
-        self, read: Read, priority: Priority, fresh: set[Address]
-    ) -> tuple[bool, Refusal | None]:
-        """Bisect a refused block with real reads: whether any part answered, and what the
-        device refused (None when it stopped answering meanwhile)."""
-        search = refusal_search(read, list(self.points.values()))
-        answered = False
-        try:
-            part = next(search)
-            while True:
-                ok = await self._probe(part, priority, fresh)
-                answered = answered or ok
-                part = search.send(ok)
-        except StopIteration as done:
-            return answered, done.value
-        except ModbusError:
-            return answered, None
-
-    async def _probe(self, read: Read, priority: Priority, fresh: set[Address]) -> bool:
-        """One read of a bisection: True answered (values kept), False refused."""
-        try:
-            values = await self.submit(read, priority)
-        except DeviceExceptionError as exc:
-            if exc.action == "refused":
-                return False
-            raise
-        self._keep(read, values, fresh)
-        return True
-
-    def _keep(self, read: Read, values: tuple[int, ...], fresh: set[Address]) -> None:
+    def keep(self, read: Read, values: tuple[int, ...], fresh: set[Address]) -> None:
         for address, value in zip(read.span, values, strict=True):
             self.image[(read.table, address)] = value
             fresh.add((read.table, address))
         back = self.refusals.answer(addresses_of(read))
         if back:
-            log.info("%s answers %s again; read again", self.device.id, self._shown(back))
-            self._forget_plans()
-
-    def _remember(self, refusal: Refusal, exc: DeviceExceptionError) -> None:
-        """Avoid what the device refused until the re-check (logged the first time, with the
-        device's reason), and read no more registers at once than it showed it takes."""
-        avoided = self.refusals.refused
-        first = self.refusals.learn(refusal.refused, time.monotonic())
-        if first:
-            log.warning(
-                "%s refused %s with %s; not read again for %.0f s",
-                self.device.id,
-                self._shown(first),
-                exc,
-                self.refusals.recheck,
-            )
-        elif refusal.refused:
-            log.debug("%s refused %s again", self.device.id, self._shown(refusal.refused))
-        if refusal.refused - avoided:
-            self._forget_plans()
-        if refusal.max_count is not None and refusal.max_count < (self.max_read or 0x10000):
-            self.max_read = refusal.max_count
-            log.warning(
-                "%s: at most %d registers per read; plans adjusted", self.device.id, self.max_read
-            )
-            self._forget_plans()
-
-    def _shown(self, addresses: Iterable[Address]) -> str:
-        """``holding 0x00A0 (wire 159)``: the address as the manual prints it, and as sent."""
-        return ", ".join(
-            f"{table.value} {printed_address(self.points.values(), table, wire, self.protocol)}"
-            f" (wire {wire})"
-            for table, wire in sorted(addresses)
-        )
-
-    def _recheck_refusals(self) -> None:
-        """Forget the refusals learnt ``refusal_recheck`` ago: the next plan reads them."""
-        due = self.refusals.expire(time.monotonic())
-        if due:
-            log.debug("%s: reading %s again (refused before)", self.device.id, self._shown(due))
-            self._forget_plans()
-
-    def _refused_everything(self) -> None:
-        """A pass refused as a whole: a device fault (nothing learnt), a failure."""
-        self._announce(self.health.refuses_every_read(time.monotonic()), first_contact=False)
+            log.info("%s answers %s again; read again", self.device.id, self.learner.shown(back))
+            self.forget_plans()
 
     async def submit(
         self,
@@ -384,7 +289,7 @@ class DevicePoller:
         """The device stays locked: in error with the reason (logged once), offline."""
         if self.health.fault is not Fault.LOCKED:
             log.error("%s: %s", self.device.id, reason)
-            self._announce(self.health.locked(time.monotonic(), reason), first_contact=False)
+            self.announce(self.health.locked(time.monotonic(), reason), first_contact=False)
 
     async def _submit(
         self,
@@ -433,9 +338,9 @@ class DevicePoller:
             log.info("%s answers again: its watchdog is fed", self.device.id)
         first_contact = self.health.online is None
         transition = self.health.record(outcome, now, latency=latency, code=code)
-        self._announce(transition, first_contact=first_contact)
+        self.announce(transition, first_contact=first_contact)
 
-    def _announce(self, transition: Transition | None, *, first_contact: bool) -> None:
+    def announce(self, transition: Transition | None, *, first_contact: bool) -> None:
         """Log a change of state once (offline with the reason) and publish it."""
         if transition is None:
             return
