@@ -84,7 +84,7 @@ class DiscoveryPublisher:
 
     @staticmethod
     def _shown(poller: DevicePoller) -> dict[str, Value]:
-        return shown_readings(poller.points, poller.values, poller.image, poller.mapping.status)
+        return shown_readings(poller.points, poller.values, poller.image)
 
     def ready(self, poller: DevicePoller) -> bool:
         """True when the device's discovery has what it depends on (or depends on nothing)."""

@@ -114,7 +114,7 @@ def cases(name: str) -> Iterator[Case]:
             )
             for label, image in images(points).items():
                 values = values_of(points, image)
-                readings = shown_readings(points, values, image, mapping.status)
+                readings = shown_readings(points, values, image)
                 discovery = build_device_discovery(device, TOPICS, ORIGIN, readings=readings)
                 state = state_document(mapping, points, values)
                 chosen = ",".join(f"{k}={v}" for k, v in sorted(options.items()))

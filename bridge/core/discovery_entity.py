@@ -151,23 +151,16 @@ def alarms_config(context: ComponentContext) -> Config:
 
 
 def shown_readings(
-    points: AnyMapping[str, Point],
-    values: AnyMapping[str, Value],
-    image: Image,
-    status: str | None = None,
+    points: AnyMapping[str, Point], values: AnyMapping[str, Value], image: Image
 ) -> dict[str, Value]:
     """The values read that a discovery payload must admit, by key: an enum code the
     mapping has no label for (an option), a writable number outside its limits or below
-    its ``dangerous_below`` (the number's range). ``status``: the mapping's status key,
-    whose value the ``status`` component shows too."""
-    shown: dict[str, Value] = {}
-    for key, point in points.items():
-        value = values.get(key)
-        if is_unknown_code(point.entity, value) or _beyond(point, value, image):
-            shown[key] = value
-    if status is not None and status in shown:
-        shown["status"] = shown[status]
-    return shown
+    its ``dangerous_below`` (the number's range)."""
+    return {
+        key: values.get(key)
+        for key, point in points.items()
+        if is_unknown_code(point.entity, values.get(key)) or _beyond(point, values.get(key), image)
+    }
 
 
 def admitted(

@@ -859,8 +859,8 @@ def test_the_status_component_admits_the_status_entity_s_unknown_code() -> None:
     mapping = make_mapping(entities, status="state")
     image = {(Table.HOLDING, 0): 9}
     values = {"state": "code_9"}
-    shown = shown_readings(mapping.points(), values, image, "state")
-    assert shown == {"state": "code_9", "status": "code_9"}
+    shown = shown_readings(mapping.points(), values, image)
+    assert shown == {"state": "code_9"}
     cmps = _cmps(entities, mapping_status="state", readings=shown)
     assert "status" not in cmps  # the status entity is published once, as itself
     assert cmps["state"]["options"] == ["off", "on", "code_9"]
@@ -922,4 +922,4 @@ def test_a_payload_admits_the_readings_inside_the_range_its_reading_widened() ->
     assert not admitted(points, sent, {"ramp": 301}, image)  # out on the other side
     assert not admitted(points, sent, {"mode": "code_5"}, image)  # another unknown code
     assert not admitted(points, {}, {"ramp": 0}, image)  # nothing widened yet
-    assert not admitted(points, sent, {"status": "code_4"}, image)  # not sent for status
+    assert not admitted(points, sent, {"other": "code_4"}, image)  # not sent for that key
