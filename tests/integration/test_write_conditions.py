@@ -4,24 +4,34 @@ and a mapping reload keeps it."""
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import AsyncIterator
 
 import pytest
 
 from bridge.errors import CommandExpiredError, CommandRejectedError
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
+from bridge.modbus.simulator import Simulator
 from tests.integration.harness import config, running, serving_tcp, simulator, tcp_bus
 from tests.integration.test_seed_behaviours import GEN_TOGGLE, smartgen_device, writes_to
 
 SMARTGEN = "smartgen_hgm6100"
 
 
-async def ready(engine: Engine) -> DevicePoller:
-    """The genset, read once (the conditions and the breaker state are known)."""
-    genset = engine.devices[SMARTGEN]
-    await genset.read_now()
-    return genset
+@contextlib.asynccontextmanager
+async def manual_genset() -> AsyncIterator[tuple[Simulator, Engine, DevicePoller]]:
+    """A simulated genset in manual mode on its own bus, read once (its conditions and
+    breaker state known); no polls, so every write seen is the test's."""
+    sim = simulator((1, SMARTGEN))
+    sim.set_value(1, "manual_mode", True)
+    async with serving_tcp(sim) as port:
+        engine = Engine(config([tcp_bus(port)], [smartgen_device()]))
+        async with running(engine, pollers=False):
+            genset = engine.devices[SMARTGEN]
+            await genset.read_now()
+            yield sim, engine, genset
 
 
 @pytest.mark.asyncio
@@ -29,53 +39,38 @@ async def test_a_key_with_conditions_is_refused_beside_other_keys() -> None:
     """In manual mode, ``command_auto`` with ``command_start`` in one command: the start's
     condition (manual mode) was read before the command, which leaves manual mode first.
     Nothing is written; alone, each goes through."""
-    sim = simulator((1, SMARTGEN))
-    sim.set_value(1, "manual_mode", True)
-    async with serving_tcp(sim) as port:
-        engine = Engine(config([tcp_bus(port)], [smartgen_device()]))
-        async with running(engine, pollers=False):
-            genset = await ready(engine)
-            with pytest.raises(CommandRejectedError) as caught:
-                await genset.write_many({"command_auto": "PRESS", "command_start": "PRESS"})
-            for key in ("command_auto", "command_start"):  # both have conditions
-                assert "send it in a command of its own" in caught.value.reason(key)
-            assert writes_to(sim, 1) == []
-            await genset.write_many({"command_start": "PRESS"})
-            assert len(writes_to(sim, 1)) == 1
+    async with manual_genset() as (sim, _, genset):
+        with pytest.raises(CommandRejectedError) as caught:
+            await genset.write_many({"command_auto": "PRESS", "command_start": "PRESS"})
+        for key in ("command_auto", "command_start"):  # both have conditions
+            assert "send it in a command of its own" in caught.value.reason(key)
+        assert writes_to(sim, 1) == []
+        await genset.write_many({"command_start": "PRESS"})
+        assert len(writes_to(sim, 1)) == 1
 
 
 @pytest.mark.asyncio
 async def test_a_toggle_that_expired_unsent_does_not_hold_up_the_next() -> None:
     """The breaker toggle's 2 s spacing counts attempts that went out: one dropped at its
     expiry before a byte was sent leaves the next command free."""
-    sim = simulator((1, SMARTGEN))
-    sim.set_value(1, "manual_mode", True)
-    async with serving_tcp(sim) as port:
-        engine = Engine(config([tcp_bus(port)], [smartgen_device()]))
-        async with running(engine, pollers=False):
-            genset = await ready(engine)
-            with pytest.raises(CommandExpiredError) as caught:
-                await genset.write_many({"generator_breaker": True}, deadline=time.monotonic() - 1)
-            assert caught.value.sent is False
-            assert writes_to(sim, 1) == []
-            await genset.write_many({"generator_breaker": True})
-            assert [w.address for w in writes_to(sim, 1)] == [GEN_TOGGLE]
+    async with manual_genset() as (sim, _, genset):
+        with pytest.raises(CommandExpiredError) as caught:
+            await genset.write_many({"generator_breaker": True}, deadline=time.monotonic() - 1)
+        assert caught.value.sent is False
+        assert writes_to(sim, 1) == []
+        await genset.write_many({"generator_breaker": True})
+        assert [w.address for w in writes_to(sim, 1)] == [GEN_TOGGLE]
 
 
 @pytest.mark.asyncio
 async def test_a_mapping_reload_keeps_the_toggle_spacing() -> None:
     """Reloading the mapping right after a toggle does not let a second toggle out within
     its 2 s (the device may still be acting on the first)."""
-    sim = simulator((1, SMARTGEN))
-    sim.set_value(1, "manual_mode", True)
-    async with serving_tcp(sim) as port:
-        engine = Engine(config([tcp_bus(port)], [smartgen_device()]))
-        async with running(engine, pollers=False):
-            genset = await ready(engine)
-            await genset.write_many({"generator_breaker": True})
-            reloaded = await engine.replace_mapping(SMARTGEN, genset.mapping)
-            await reloaded.read_now()
-            with pytest.raises(CommandRejectedError) as caught:
-                await reloaded.write_many({"generator_breaker": False})
-            assert "not again within 2 s" in caught.value.reason("generator_breaker")
-            assert [w.address for w in writes_to(sim, 1)] == [GEN_TOGGLE]
+    async with manual_genset() as (sim, engine, genset):
+        await genset.write_many({"generator_breaker": True})
+        reloaded = await engine.replace_mapping(SMARTGEN, genset.mapping)
+        await reloaded.read_now()
+        with pytest.raises(CommandRejectedError) as caught:
+            await reloaded.write_many({"generator_breaker": False})
+        assert "not again within 2 s" in caught.value.reason("generator_breaker")
+        assert [w.address for w in writes_to(sim, 1)] == [GEN_TOGGLE]
