@@ -23,8 +23,12 @@ $(RUN): pyproject.toml $(SOURCES) | $(BIN)/python
 	$(BIN)/pip install --quiet '.[demo]'
 	rm -f $(VENV)/.installed-demo-* && touch $@
 
+# The suite mostly waits (brokers, buses, timeouts): four workers, one test file each at a
+# time, make it three times quicker even on two cores. `make test PYTEST_ARGS=` runs serially.
+PYTEST_ARGS ?= -n 4 --dist loadfile
+
 test: $(DEV)
-	$(BIN)/pytest
+	$(BIN)/pytest $(PYTEST_ARGS)
 
 check: $(DEV)
 	$(BIN)/ruff check .

@@ -43,7 +43,7 @@ def test_make_test_installs_the_dev_toolchain_editable(tmp_path: Path) -> None:
     venv = tmp_path / "venv"
     lines = planned("test", venv)
     assert f"{venv}/bin/pip install --quiet -e '.[dev]'" in lines
-    assert lines[-1] == f"{venv}/bin/pytest"
+    assert lines[-1] == f"{venv}/bin/pytest -n 4 --dist loadfile"
 
 
 def test_make_demo_uses_a_dev_venv_as_it_is(tmp_path: Path) -> None:
