@@ -99,6 +99,14 @@ def _addresses(mapping: Mapping) -> Iterator[str]:
                 yield f"protocol.{name}: start {start!r} is after end {end!r}"
         except ValueError as exc:
             yield f"protocol.{name}[{index}]: {exc}"
+    unlock = mapping.protocol.unlock
+    if unlock is not None:
+        for name, printed in (("address", unlock.address), ("lock", unlock.lock)):
+            try:
+                if printed is not None:
+                    to_wire(printed, rule)
+            except ValueError as exc:
+                yield f"protocol.unlock.{name}: {exc}"
 
 
 def _options(mapping: Mapping) -> Iterator[str]:

@@ -43,13 +43,18 @@ class Unlock(BaseModel):
     writes the device's configured password once and sends the request again; an answer of
     ``wrong_password`` to that write means the password is wrong (the device is put in
     error, no second try). ``success``: the code the device answers on success, in the
-    write's echo or read from ``address`` afterwards."""
+    write's echo or read from ``address`` afterwards. ``lock``: where a lock command goes."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     address: PrintedAddress
     success: int | None = Field(None, ge=0, le=0xFFFF)
     wrong_password: int = Field(1, ge=1, le=255, description="exception code of a wrong password")
+    lock: PrintedAddress | None = Field(
+        None,
+        description="the register a lock command is written to: refused while the bridge "
+        "holds the password (it would unlock the device again at once)",
+    )
 
 
 class Segment(BaseModel):

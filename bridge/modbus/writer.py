@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from bridge.core.address import to_wire
 from bridge.core.codec import Value, decode, encode
 from bridge.core.entity import Table
 from bridge.core.mapping import Point
@@ -280,6 +281,18 @@ class DeviceWriter:
             raise ValueRejectedError(f"{point.key} is read-only")
         if entity.dangerous and not self.poller.device.allow_dangerous_writes:
             raise self._guarded(point.key)
+        protocol, device = self.poller.protocol, self.poller.device
+        unlock = protocol.unlock
+        if unlock is None or unlock.lock is None or not device.has_password:
+            return
+        if point.table is Table.HOLDING and point.write_address == to_wire(
+            unlock.lock, protocol.addressing
+        ):
+            raise ValueRejectedError(
+                f"{point.key} would lock {device.id}, which the bridge unlocks again at once "
+                "with the password in its config: lock it at the panel, or remove "
+                f"devices.{device.id}.password_* first"
+            )
 
     def _check_unguarded(
         self, point: Point, writes: tuple[Write, ...], before: dict[Address, int]

@@ -1,6 +1,6 @@
-"""Writes with conditions and spacing on a real bus (the Smartgen simulator over Modbus TCP):
-a key with ``requires`` goes alone, a toggle's spacing counts only attempts that went out,
-and a mapping reload keeps it."""
+"""Writes with conditions and spacing on a real bus (the Smartgen and P2 simulators over
+Modbus TCP): a key with ``requires`` goes alone, a toggle's spacing counts only attempts
+that went out, a mapping reload keeps it, and a lock the bridge would undo is refused."""
 
 from __future__ import annotations
 
@@ -15,7 +15,13 @@ from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.simulator import Simulator
 from tests.integration.harness import config, running, serving_tcp, simulator, tcp_bus
-from tests.integration.test_seed_behaviours import GEN_TOGGLE, smartgen_device, writes_to
+from tests.integration.test_seed_behaviours import (
+    GEN_TOGGLE,
+    P2_PASSWORD,
+    device,
+    smartgen_device,
+    writes_to,
+)
 
 SMARTGEN = "smartgen_hgm6100"
 
@@ -74,3 +80,32 @@ async def test_a_mapping_reload_keeps_the_toggle_spacing() -> None:
             await reloaded.write_many({"generator_breaker": False})
         assert "not again within 2 s" in caught.value.reason("generator_breaker")
         assert [w.address for w in writes_to(sim, 1)] == [GEN_TOGGLE]
+
+
+P2_LOCK = 0x1F01
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("with_password", [True, False])
+async def test_a_lock_the_bridge_would_undo_at_once_is_refused(
+    with_password: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The P2 holding its password in the config: pressing ``lock_parameters`` would lock
+    the drive and the bridge would unlock it on the next poll, so it is refused, saying so.
+    Without a password the press is written (the drive then stays locked: asked for)."""
+    monkeypatch.setenv("P2_PASSWORD", str(P2_PASSWORD))
+    fields = {"password_env": "P2_PASSWORD"} if with_password else {}
+    p2 = device("p2_vfd", allow_dangerous_writes=True, **fields)
+    sim = simulator((1, "p2_vfd"))
+    async with serving_tcp(sim) as port:
+        engine = Engine(config([tcp_bus(port)], [p2]))
+        async with running(engine, pollers=False):
+            drive = engine.devices["p2_vfd"]
+            if with_password:
+                with pytest.raises(CommandRejectedError) as caught:
+                    await drive.write_many({"lock_parameters": "PRESS"})
+                assert "unlocks again at once" in caught.value.reason("lock_parameters")
+                assert writes_to(sim, 1) == []
+            else:
+                await drive.write_many({"lock_parameters": "PRESS"})
+                assert [(w.address, w.values) for w in writes_to(sim, 1)] == [(P2_LOCK, (0x55AA,))]

@@ -697,3 +697,10 @@ def test_devices_of_one_model_share_points_and_read_limits_without_changing_equa
     copy = mapping.model_copy(update={"protocol": faster})
     assert copy.points()["motor_run"] is not first["motor_run"]  # built for the copy
     assert limits_for(copy).max_registers == 2
+
+
+def test_unlock_addresses_must_be_addresses() -> None:
+    entity = {"x": {"name": "X", "address": 1}}
+    unlock = {"address": 0x1F00, "lock": "P99.999"}
+    rows = errors_of(entity, protocol={"unlock": unlock})
+    assert any(r.startswith("protocol.unlock.lock: ") for r in rows), rows
