@@ -2,8 +2,9 @@
 
 The only module that imports prometheus_client (an import-linter contract keeps it so).
 ``serve_metrics(config, source)`` is an async context manager: with ``config.enabled`` it
-listens on ``config.host:config.port`` with a minimal HTTP server on the event loop
-(``GET /metrics``, also ``/``), and each scrape reads a fresh ``source()`` snapshot, on the
+listens on ``config.host:config.port`` with the web page's HTTP server on the event loop
+(bridge/web/http.py: bounded requests, timeouts, a connection cap; ``GET /metrics``,
+also ``/``), and each scrape reads a fresh ``source()`` snapshot, on the
 loop's thread, so nothing is shared across threads. Plain Prometheus text by default,
 OpenMetrics when the scraper's Accept header asks for it. ``GET /health`` is the container
 health check: 200 and ``{"status": "ok"}`` while no bus is down, 503 and the reason of
@@ -41,11 +42,11 @@ the bridge started:
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import json
 import logging
 from collections.abc import AsyncIterator, Callable, Iterator
+from http import HTTPStatus
 from operator import attrgetter
 
 from prometheus_client.exposition import choose_encoder
@@ -54,12 +55,11 @@ from prometheus_client.registry import CollectorRegistry
 
 from bridge.config import MetricsConfig
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, buses_down
+from bridge.web.http import Request, Response, listening
 
 log = logging.getLogger(__name__)
-REQUEST_TIMEOUT = 10.0  # a scraper that sends no request line within this is dropped
 PATHS = frozenset({"/", "/metrics"})
 HEALTH_PATH = "/health"
-_TEXT = "text/plain; charset=utf-8"
 
 Source = Callable[[], Snapshot]
 
@@ -172,68 +172,31 @@ def _device_metrics(snapshot: Snapshot) -> Iterator[Metric]:
         yield gauge
 
 
-class MetricsServer:
-    """Answers scrapes over HTTP on the event loop."""
+class MetricsApp:
+    """Answers scrapes and health checks (served by bridge/web/http.py's server)."""
 
     def __init__(self, source: Source) -> None:
         self.source = source
         self.registry = CollectorRegistry()
         self.registry.register(SnapshotCollector(source))
-        self._writers: set[asyncio.StreamWriter] = set()
 
-    def respond(self, method: str, target: str, accept: str) -> tuple[str, str, bytes]:
-        """Status, content type and body for one request."""
-        if method not in ("GET", "HEAD"):
-            return "405 Method Not Allowed", _TEXT, b"GET only\n"
-        path = target.partition("?")[0]
-        if path == HEALTH_PATH:
+    async def handle(self, request: Request) -> Response:
+        """One request: the metrics, the health document, or why not."""
+        if request.method not in ("GET", "HEAD"):
+            return Response(HTTPStatus.METHOD_NOT_ALLOWED, b"GET only\n")
+        if request.path == HEALTH_PATH:
             return self.health()
-        if path not in PATHS:
-            return "404 Not Found", _TEXT, b"metrics are on /metrics, health on /health\n"
-        encoder, content_type = choose_encoder(accept)
-        return "200 OK", content_type, encoder(self.registry)
+        if request.path not in PATHS:
+            return Response(HTTPStatus.NOT_FOUND, b"metrics are on /metrics, health on /health\n")
+        encoder, content_type = choose_encoder(request.headers.get("accept", ""))
+        return Response(HTTPStatus.OK, encoder(self.registry), content_type)
 
-    def health(self) -> tuple[str, str, bytes]:
+    def health(self) -> Response:
         """503 with each bus that is down and why, else 200."""
         down = buses_down(self.source())
-        status = "503 Service Unavailable" if down else "200 OK"
         document = {"status": "down", "buses": down} if down else {"status": "ok"}
-        return status, "application/json", json.dumps(document).encode() + b"\n"
-
-    async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        """One connection, one request, then close (HTTP/1.1 with Connection: close)."""
-        self._writers.add(writer)
-        try:
-            async with asyncio.timeout(REQUEST_TIMEOUT):
-                head = await reader.readuntil(b"\r\n\r\n")
-            request, *lines = head.decode("latin-1").split("\r\n")
-            method, target, *_ = [*request.split(" "), "", ""]
-            headers = {
-                key.strip().lower(): value.strip()
-                for key, _, value in (line.partition(":") for line in lines)
-            }
-            status, content_type, body = self.respond(method, target, headers.get("accept", ""))
-            writer.write(
-                f"HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\n"
-                f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n".encode("latin-1")
-            )
-            if method != "HEAD":
-                writer.write(body)
-            await writer.drain()
-        except (
-            TimeoutError,
-            ConnectionError,
-            asyncio.IncompleteReadError,
-            asyncio.LimitOverrunError,
-        ):
-            pass  # a scraper that went away or never asked: nothing to answer
-        finally:
-            self._writers.discard(writer)
-            writer.close()
-
-    def close_connections(self) -> None:
-        for writer in list(self._writers):
-            writer.close()
+        status = HTTPStatus.SERVICE_UNAVAILABLE if down else HTTPStatus.OK
+        return Response(status, json.dumps(document).encode() + b"\n", "application/json")
 
 
 @contextlib.asynccontextmanager
@@ -242,17 +205,7 @@ async def serve_metrics(config: MetricsConfig, source: Source) -> AsyncIterator[
     if not config.enabled:
         yield
         return
-    metrics = MetricsServer(source)
-    try:
-        server = await asyncio.start_server(metrics.handle, config.host, config.port)
-    except OSError as exc:
-        reason = str(exc.strerror or exc).rpartition(": ")[2]  # asyncio repeats the address
-        where = f"{config.host}:{config.port}"
-        raise OSError(exc.errno, f"metrics endpoint: cannot listen on {where}: {reason}") from None
-    log.info("metrics on http://%s:%d/metrics", config.host, config.port)
-    try:
+    app = MetricsApp(source)
+    async with listening(app.handle, config.host, config.port, "metrics endpoint"):
+        log.info("metrics on http://%s:%d/metrics", config.host, config.port)
         yield
-    finally:
-        server.close()
-        metrics.close_connections()
-        await server.wait_closed()

@@ -15,7 +15,6 @@ while nobody watches).
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator
@@ -38,25 +37,13 @@ async def serve_web(settings: WebConfig, bridge: BridgeState) -> AsyncIterator[N
         yield
         return
     from bridge.web.access import Access  # noqa: PLC0415 - only when on
-    from bridge.web.http import HEAD_LIMIT, HttpServer  # noqa: PLC0415
+    from bridge.web.http import listening  # noqa: PLC0415
     from bridge.web.server import WebApp, load_static  # noqa: PLC0415
 
-    http = HttpServer(WebApp(bridge, Access.of(settings), load_static()).handle)
-    try:
-        server = await asyncio.start_server(
-            http.serve, settings.host, settings.port, limit=HEAD_LIMIT
-        )
-    except OSError as exc:
-        reason = str(exc.strerror or exc).rpartition(": ")[2]  # asyncio repeats the address
-        where = f"{settings.host}:{settings.port}"
-        raise OSError(exc.errno, f"web page: cannot listen on {where}: {reason}") from None
-    log.info("web page on %s", page_url(settings))
-    try:
+    app = WebApp(bridge, Access.of(settings), load_static())
+    async with listening(app.handle, settings.host, settings.port, "web page"):
+        log.info("web page on %s", page_url(settings))
         yield
-    finally:
-        server.close()
-        await http.close()
-        await server.wait_closed()
 
 
 def page_url(settings: WebConfig) -> str:

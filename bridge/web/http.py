@@ -1,6 +1,6 @@
 """A small HTTP/1.1 server on the event loop: one request per connection, bounded everywhere.
 
-Only what the web page needs, in the spirit of the metrics endpoint (bridge/metrics.py):
+Only what the web page and the metrics endpoint (bridge/metrics.py) need:
 ``GET``/``HEAD``/``POST`` with a ``Content-Length`` body, and Server-Sent Events. Every
 connection is closed after its answer (``Connection: close``); an event stream stays open
 until the client goes away or the server stops. Nothing a client sends can hold the
@@ -21,7 +21,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Awaitable, Callable, Coroutine
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field, replace
 from http import HTTPStatus
 from typing import Any
@@ -262,3 +262,21 @@ async def _until_closed(reader: asyncio.StreamReader) -> None:
     """Return when the client closes its side (whatever it sends meanwhile is ignored)."""
     while await reader.read(1024):
         pass
+
+
+@contextlib.asynccontextmanager
+async def listening(handler: Handler, host: str, port: int, what: str) -> AsyncIterator[None]:
+    """Serve ``handler`` on ``host:port`` for the duration of the block, then stop listening
+    and end open connections. OSError naming ``what`` and the address when it cannot."""
+    http = HttpServer(handler)
+    try:
+        server = await asyncio.start_server(http.serve, host, port, limit=HEAD_LIMIT)
+    except OSError as exc:
+        reason = str(exc.strerror or exc).rpartition(": ")[2]  # asyncio repeats the address
+        raise OSError(exc.errno, f"{what}: cannot listen on {host}:{port}: {reason}") from None
+    try:
+        yield
+    finally:
+        server.close()
+        await http.close()
+        await server.wait_closed()
