@@ -133,15 +133,22 @@ def initial_image(mapping: Mapping, points: AnyMapping[str, Point]) -> dict[Cell
     return image
 
 
+def numbered(key: str) -> tuple[str, int] | None:
+    """``alarm_history_3`` -> ``("alarm_history", 3)``; None for a key without a number."""
+    match = _NUMBERED.match(key)
+    return None if match is None else (match.group(1), int(match.group(2)))
+
+
 def _slots(points: AnyMapping[str, Point]) -> dict[str, int]:
     """Keys of numbered enums sharing their labels (``alarm_history_1``..``_8``): their
     place among them, so that each slot holds another label."""
     families: dict[tuple[str, tuple[str, ...]], list[tuple[int, str]]] = {}
     for key, point in points.items():
-        match = _NUMBERED.match(key)
-        if match and point.entity.enum and not point.entity.alarm:
+        found = numbered(key)
+        if found and point.entity.enum and not point.entity.alarm:
+            stem, number = found
             labels = tuple(point.entity.enum.values())
-            families.setdefault((match.group(1), labels), []).append((int(match.group(2)), key))
+            families.setdefault((stem, labels), []).append((number, key))
     slots: dict[str, int] = {}
     for members in families.values():
         if len(members) > 1:

@@ -26,7 +26,6 @@ Every function returns the cells that change; the new image is the old one updat
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass
 
@@ -34,7 +33,7 @@ from bridge.core.codec import Image, Value, decode
 from bridge.core.entity import Access, Entity
 from bridge.core.mapping import Mapping, Point
 from bridge.core.request import Write
-from bridge.core.simulation import Cell, stored_cells, words_for
+from bridge.core.simulation import Cell, numbered, stored_cells, words_for
 from bridge.errors import ValueRejectedError
 
 RUN, STOP, RESET = "run", "stop", "reset"
@@ -53,7 +52,6 @@ _STILL_WORDS = frozenset(
     {"mains", "dc", "bus", "link", "battery", "charger", "rated", "set", "reference"}
     | {"factor", "temperature", "max", "min", "input", "setpoint"}
 )
-_SLOT = re.compile(r"^(.*?)_?(\d+)$")
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,9 +188,10 @@ def _history(points: AnyMapping[str, Point]) -> tuple[Point, ...]:
     """The alarm-history slots (``alarm_history_1``...): enums sharing labels, by number."""
     slots: dict[str, list[tuple[int, Point]]] = {}
     for key, point in points.items():
-        match = _SLOT.match(key)
-        if match and point.entity.enum and "history" in words(match.group(1)):
-            slots.setdefault(match.group(1), []).append((int(match.group(2)), point))
+        found = numbered(key)
+        if found and point.entity.enum and "history" in words(found[0]):
+            stem, number = found
+            slots.setdefault(stem, []).append((number, point))
     family = max(slots.values(), key=len, default=[])
     return tuple(point for _, point in sorted(family, key=lambda item: item[0]))
 
