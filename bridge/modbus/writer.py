@@ -48,8 +48,8 @@ class WriteCounters:
     rejected: int = 0
     failed: int = 0
     expired: int = 0
-    last_write: dict[int, float] = field(default_factory=dict)
-    last_attempt: dict[int, float] = field(default_factory=dict)  # write_interval entities
+    last_write: dict[Address, float] = field(default_factory=dict)  # EEPROM registers
+    last_attempt: dict[Address, float] = field(default_factory=dict)  # write_interval
 
 
 class DeviceWriter:
@@ -106,7 +106,7 @@ class DeviceWriter:
         )
         attempts = self.counters.last_attempt
         spaced = [
-            p.write_address for p in points if p.entity.write_interval is not None and p.key in plan
+            _written(p) for p in points if p.entity.write_interval is not None and p.key in plan
         ]
         before = {a: attempts[a] for a in spaced if a in attempts}
         for address in spaced:  # an attempt counts: a toggle that timed out may have acted
@@ -127,7 +127,7 @@ class DeviceWriter:
         written = [p for p in points if p.key in plan]
         for point in written:
             if point.entity.eeprom:
-                self.counters.last_write[point.write_address] = time.monotonic()
+                self.counters.last_write[_written(point)] = time.monotonic()
             if point.entity.readable and point.entity.press is None:
                 self._publish_acknowledged(point, plan[point.key])
         for point in written:
@@ -216,7 +216,7 @@ class DeviceWriter:
     def _check_write_interval(self, point: Point) -> None:
         """A toggle is never sent twice within its ``write_interval`` (attempts count)."""
         interval = point.entity.write_interval
-        last = self.counters.last_attempt.get(point.write_address)
+        last = self.counters.last_attempt.get(_written(point))
         if interval is None or last is None:
             return
         waited = time.monotonic() - last
@@ -320,7 +320,7 @@ class DeviceWriter:
 
     def _check_eeprom_rate(self, point: Point) -> None:
         """An EEPROM parameter is rewritten at most once per ``eeprom_write_interval``."""
-        last = self.counters.last_write.get(point.write_address)
+        last = self.counters.last_write.get(_written(point))
         wait = self.poller.protocol.eeprom_write_interval
         if last is not None and time.monotonic() - last < wait:
             left = wait - (time.monotonic() - last)
@@ -376,3 +376,9 @@ def _word(value: object) -> str:
 
 def _as_value(value: object) -> Value:
     return value if isinstance(value, bool | int | float | str) else None
+
+
+def _written(point: Point) -> Address:
+    """The register or coil a write of ``point`` goes to (the key of its write spacing)."""
+    space = Table.COIL if point.table is Table.COIL else Table.HOLDING
+    return (space, point.write_address)

@@ -7,13 +7,15 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import pytest
 
+from bridge.core.mapping import load_mapping
 from bridge.errors import CommandExpiredError, CommandRejectedError
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
-from bridge.modbus.simulator import Simulator
+from bridge.modbus.simulator import SimulatedUnit, Simulator
 from tests.integration.harness import config, running, serving_tcp, simulator, tcp_bus
 from tests.integration.test_seed_behaviours import (
     GEN_TOGGLE,
@@ -109,3 +111,37 @@ async def test_a_lock_the_bridge_would_undo_at_once_is_refused(
             else:
                 await drive.write_many({"lock_parameters": "PRESS"})
                 assert [(w.address, w.values) for w in writes_to(sim, 1)] == [(P2_LOCK, (0x55AA,))]
+
+
+SPACED = """
+manufacturer: Test
+model: Spaced
+description: a coil and a register at the same address, each written at most every 2 s
+source: {title: test}
+entities:
+  relay: {name: Relay, address: 5, table: coil, access: rw, write_interval: 2s}
+  setpoint: {name: Setpoint, address: 5, access: rw, write_interval: 2s}
+"""
+
+
+@pytest.mark.asyncio
+async def test_write_spacing_is_kept_per_coil_and_per_register(tmp_path: Path) -> None:
+    """Coil 5 and holding register 5 are two things: writing one does not hold up the
+    other; each keeps its own spacing."""
+    path = tmp_path / "spaced.yaml"
+    path.write_text(SPACED)
+    sim = Simulator([SimulatedUnit(1, load_mapping(path))])
+    async with serving_tcp(sim) as port:
+        unit = {"id": "spaced", "bus": "tcp", "unit": 1, "mapping": str(path)}
+        engine = Engine(config([tcp_bus(port)], [unit]))
+        async with running(engine, pollers=False):
+            spaced = engine.devices["spaced"]
+            await spaced.write_many({"relay": True})
+            await spaced.write_many({"setpoint": 7})
+            with pytest.raises(CommandRejectedError) as caught:
+                await spaced.write_many({"setpoint": 8})
+            assert "not again within 2 s" in caught.value.reason("setpoint")
+    assert [(w.table.value, w.address, w.values) for w in writes_to(sim, 1)] == [
+        ("coil", 5, (0xFF00,)),
+        ("holding", 5, (7,)),
+    ]
