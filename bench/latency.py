@@ -39,7 +39,7 @@ import statistics
 import sys
 import tempfile
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the private brok
 from dead_device import stamp_fast_polls
 
 from bridge.app import Bridge
-from bridge.config import MqttConfig, load_config_data
+from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 from bridge.mqtt import MqttClient
@@ -146,6 +146,30 @@ async def command(
 
 
 @contextlib.asynccontextmanager
+async def bridged(
+    sim: Simulator,
+    config_for: Callable[[int, Broker], LoadedConfig],
+    broker_class: type[Broker] = Broker,
+) -> AsyncIterator[tuple[Bridge, Broker]]:
+    """A private broker, ``sim`` on a free loopback port and, in this process, the bridge
+    of ``config_for(the simulator's port, the broker)``, for the duration of the block."""
+    with tempfile.TemporaryDirectory() as folder:
+        broker = broker_class(Path(folder))
+        broker.start()
+        try:
+            async with asyncio.TaskGroup() as group:
+                server = group.create_task(sim.serve_tcp("127.0.0.1", 0))
+                await sim.ready.wait()
+                bridge = Bridge(config_for(sim.port, broker))
+                task = group.create_task(bridge.run())
+                yield bridge, broker
+                task.cancel()
+                server.cancel()
+        finally:
+            broker.stop()
+
+
+@contextlib.asynccontextmanager
 async def running(
     units: tuple[int, ...], nodelay: bool
 ) -> AsyncIterator[tuple[Simulator, Bridge, str]]:
@@ -155,20 +179,12 @@ async def running(
     specs = [SimulatedUnit(u, mapping, quirks=Quirks(latency=LATENCY)) for u in LIVE]
     specs.append(SimulatedUnit(DEAD, mapping, quirks=Quirks(dead=True)))
     sim = Simulator(specs, tick=1.0)
-    with tempfile.TemporaryDirectory() as folder:
-        broker = (NodelayBroker if nodelay else Broker)(Path(folder))
-        broker.start()
-        try:
-            async with asyncio.TaskGroup() as group:
-                server = group.create_task(sim.serve_tcp("127.0.0.1", 0))
-                await sim.ready.wait()
-                bridge = Bridge(config(sim.port, broker, units))
-                task = group.create_task(bridge.run())
-                yield sim, bridge, broker.url
-                task.cancel()
-                server.cancel()
-        finally:
-            broker.stop()
+    kind = NodelayBroker if nodelay else Broker
+    async with bridged(sim, lambda port, broker: config(port, broker, units), kind) as (
+        bridge,
+        broker,
+    ):
+        yield sim, bridge, broker.url
 
 
 async def measure(commands: int, with_dead: bool, nodelay: bool, seed: int) -> Run:

@@ -32,13 +32,14 @@ import json
 import logging
 import statistics
 import sys
-import tempfile
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the private broker of the tests
+
+from latency import bridged
 
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
@@ -113,20 +114,8 @@ async def running() -> AsyncIterator[tuple[Simulator, Bridge, Broker]]:
         for unit, name in enumerate(SEEDS, start=1)
     ]
     sim = Simulator(specs, tick=1.0)
-    with tempfile.TemporaryDirectory() as folder:
-        broker = Broker(Path(folder))
-        broker.start()
-        try:
-            async with asyncio.TaskGroup() as group:
-                server = group.create_task(sim.serve_tcp("127.0.0.1", 0))
-                await sim.ready.wait()
-                bridge = Bridge(config(sim.port, broker))
-                task = group.create_task(bridge.run())
-                yield sim, bridge, broker
-                task.cancel()
-                server.cancel()
-        finally:
-            broker.stop()
+    async with bridged(sim, config) as (bridge, broker):
+        yield sim, bridge, broker
 
 
 Flood = Callable[[MqttClient], Awaitable[None]]

@@ -22,11 +22,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import socket
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -34,24 +32,19 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the private broker of the tests
 
+from latency import bridged
+
 from bridge.app import Bridge
 from bridge.config import load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
-from tests.integration.mosquitto import Broker
+from tests.integration.mosquitto import Broker, free_port
 
 SEEDS = ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100")
 GENSET = "smartgen_hgm6100"
 CLIENTS = 20
 PHASE = 12.0
 PROBE = 0.002
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-        return port
 
 
 def config(modbus_port: int, web_port: int, broker: Broker) -> Any:
@@ -76,20 +69,8 @@ async def running() -> AsyncIterator[tuple[Bridge, int]]:
     ]
     sim = Simulator(specs, tick=1.0)
     web_port = free_port()
-    with tempfile.TemporaryDirectory() as folder:
-        broker = Broker(Path(folder))
-        broker.start()
-        try:
-            async with asyncio.TaskGroup() as group:
-                server = group.create_task(sim.serve_tcp("127.0.0.1", 0))
-                await sim.ready.wait()
-                bridge = Bridge(config(sim.port, web_port, broker))
-                task = group.create_task(bridge.run())
-                yield bridge, web_port
-                task.cancel()
-                server.cancel()
-        finally:
-            broker.stop()
+    async with bridged(sim, lambda port, broker: config(port, web_port, broker)) as (bridge, _):
+        yield bridge, web_port
 
 
 async def watch(port: int, path: str, counted: list[int], *, read: bool = True) -> None:
