@@ -11,7 +11,7 @@ import asyncio
 import contextlib
 import json
 import logging
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +24,7 @@ from bridge.core.protocol import Keepalive
 from bridge.core.request import Read
 from bridge.errors import ModbusError
 from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import Priority
 from bridge.modbus.simulator import Quirks, Simulator
 from bridge.mqtt.client import MqttClient
@@ -401,6 +402,22 @@ def with_keepalive(loaded: Any, device_id: str, interval: float) -> Any:
     return loaded
 
 
+@contextlib.asynccontextmanager
+async def watched_starter(
+    interval: float, *, polled: Callable[[Any], Any] = lambda loaded: loaded
+) -> AsyncIterator[tuple[Simulator, Engine, DevicePoller]]:
+    """A soft starter with a communication watchdog of ``interval`` seconds (its mapping
+    changed by ``polled`` too), polled by a running engine until it is online."""
+    sim = simulator((1, "soft_starter"))
+    async with serving_tcp(sim) as port:
+        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
+        engine = Engine(polled(with_keepalive(loaded, "soft_starter", interval)))
+        async with running(engine):
+            starter = engine.devices["soft_starter"]
+            await eventually(lambda: starter.health.online is True)
+            yield sim, engine, starter
+
+
 async def hog(engine: Engine, unit: int) -> None:
     """Commissioning on the same bus: reads on request to a unit that never answers."""
     scheduler = engine.schedulers["tcp"]
@@ -414,28 +431,22 @@ async def test_a_soft_starter_hears_from_the_bridge_while_commissioning_holds_th
     """Reads on request to a silent unit go before polls: without the keepalive read, the
     soft starter would get no request at all while they last (its watchdog then stops the
     motor). With it, the starter is read again and again, ahead of them."""
-    sim = simulator((1, "soft_starter"))
-    async with serving_tcp(sim) as port:
-        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
-        engine = Engine(with_keepalive(loaded, "soft_starter", 1.0))
-        async with running(engine):
-            starter = engine.devices["soft_starter"]
-            await eventually(lambda: starter.health.online is True)
-            hogs = [asyncio.create_task(hog(engine, 9)) for _ in range(2)]
-            try:
-                await asyncio.sleep(0.5)  # the hog's reads queue ahead of every poll
-                answered = starter.health.requests - starter.health.timeouts
-                await eventually(
-                    lambda: starter.health.requests - starter.health.timeouts >= answered + 3,
-                    timeout=15,
-                )
-            finally:
-                for task in hogs:
-                    await cancel(task)
-            assert starter.health.online is True
+    async with watched_starter(1.0) as (_, engine, starter):
+        hogs = [asyncio.create_task(hog(engine, 9)) for _ in range(2)]
+        try:
+            await asyncio.sleep(0.5)  # the hog's reads queue ahead of every poll
+            answered = starter.health.requests - starter.health.timeouts
+            await eventually(
+                lambda: starter.health.requests - starter.health.timeouts >= answered + 3,
+                timeout=15,
+            )
+        finally:
+            for task in hogs:
+                await cancel(task)
+        assert starter.health.online is True
 
 
-def polled_once(loaded: Any, device_id: str) -> Any:
+def polled_once(loaded: Any, device_id: str = "soft_starter") -> Any:
     """The device's mapping with every entity read once at start-up: no poll block left."""
     mapping = loaded.mappings[device_id]
     entities = {
@@ -451,20 +462,12 @@ def polled_once(loaded: Any, device_id: str) -> Any:
 async def test_a_keepalive_with_nothing_to_read_leaves_the_event_loop_alone() -> None:
     """Every entity read once: the keepalive finds no block to read. It must wait, not spin
     (a loop that never awaits would freeze the whole bridge)."""
-    sim = simulator((1, "soft_starter"))
-    async with serving_tcp(sim) as port:
-        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
-        engine = Engine(polled_once(with_keepalive(loaded, "soft_starter", 0.2), "soft_starter"))
-        async with running(engine):
-            starter = engine.devices["soft_starter"]
-            await eventually(lambda: starter.health.online is True)
-            assert starter.plan_of(PollClass.FAST) == () == starter.plan_of(PollClass.SLOW)
-            ticks = 0
-            for _ in range(10):  # 1 s: five keepalive intervals with nothing to read
-                await asyncio.sleep(0.1)
-                ticks += 1
-            assert ticks == 10
-            assert starter.health.online is True
+    async with watched_starter(0.2, polled=polled_once) as (_, _, starter):
+        assert starter.plan_of(PollClass.FAST) == () == starter.plan_of(PollClass.SLOW)
+        requests = starter.health.requests
+        await asyncio.sleep(1.0)  # five keepalive intervals: returns only if the loop runs
+        assert starter.health.requests == requests  # nothing to read, nothing sent
+        assert starter.health.online is True
 
 
 @pytest.mark.asyncio
@@ -472,15 +475,9 @@ async def test_a_watchdog_that_could_not_be_fed_is_reported_once(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     caplog.set_level(logging.INFO)
-    sim = simulator((1, "soft_starter"))
-    async with serving_tcp(sim) as port:
-        loaded = config([tcp_bus(port, timeout=0.3)], [device("soft_starter")])
-        engine = Engine(with_keepalive(loaded, "soft_starter", 0.6))
-        async with running(engine):
-            starter = engine.devices["soft_starter"]
-            await eventually(lambda: starter.health.online is True)
-            sim.set_quirks(1, Quirks(dead=True))
-            await eventually(lambda: "longer than its communication watchdog" in caplog.text)
-            sim.set_quirks(1, Quirks())
-            await eventually(lambda: "its watchdog is fed" in caplog.text, timeout=15)
+    async with watched_starter(0.6) as (sim, _, _):
+        sim.set_quirks(1, Quirks(dead=True))
+        await eventually(lambda: "longer than its communication watchdog" in caplog.text)
+        sim.set_quirks(1, Quirks())
+        await eventually(lambda: "its watchdog is fed" in caplog.text, timeout=15)
     assert caplog.text.count("longer than its communication watchdog allows") == 1
