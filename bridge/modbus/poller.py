@@ -281,7 +281,7 @@ class DevicePoller:
         a password is unlocked once and the request sent again (bridge/modbus/unlock.py)."""
         return await self.unlocker.submit(
             lambda: self._submit(request, priority, retries, deadline),
-            lambda write: self._submit(write, Priority.WRITE, 0, None),
+            lambda write: self._submit(write, Priority.WRITE, self.retries, None),
             self._locked_out,
         )
 

@@ -3,8 +3,9 @@ config): the P2 drive answers exception 07 (system locked) to everything until i
 password is written to 1F00H.
 
 ``Unlocker.submit(attempt, send, locked_out)`` sends a request; when the device answers it
-``locked``, ``unlock`` writes the password once (FC06, ahead of the polls, never resent)
-and the request goes again. Requests that were locked together share one unlock. The device
+``locked``, ``unlock`` writes the password once (FC06, ahead of the polls; resent like
+any idempotent write only after no answer or a "send again" exception, within the bus's
+retries) and the request goes again. Requests that were locked together share one unlock. The device
 is put in error, with the reason, and never unlocked again while this poller lives (a
 mapping reload or a restart starts afresh) when
 
@@ -12,7 +13,9 @@ mapping reload or a restart starts afresh) when
 * the device answers the password write with ``wrong_password`` (P2: exception 01), or
 * the device is still locked right after an unlock that it accepted.
 
-So a wrong password costs one write, not one per poll. The password is never logged,
+A password write that gets no answer, a "send again" (CRC) or a busy answer is no
+verdict: the next locked request tries again. So a wrong password costs one write, not
+one per poll. The password is never logged,
 published or put in an error message.
 """
 
@@ -96,7 +99,10 @@ class Unlocker:
         password = self.device.password_value()
         if password is None or not is_register_number(password):
             self.failed = (
-                f"locked by a password: set {where}.password_env or {where}.password_file "
+                f"locked by a password, and {where}.password_* cannot be read now or is not a "
+                "number 0..65535"
+                if self.device.has_password
+                else f"locked by a password: set {where}.password_env or {where}.password_file "
                 "(a number 0..65535)"
             )
             return False
@@ -110,6 +116,8 @@ class Unlocker:
                     f"password written to {address:04X}h; fix {where}.password_* and restart "
                     "or reload the mapping"
                 )
+            elif exc.action in ("retry", "busy"):  # line noise, EEPROM busy: not a verdict
+                log.warning("%s: unlocking failed for now: %s", self.device.id, exc)
             else:
                 self.failed = f"the password write to {address:04X}h was refused ({exc})"
             return False
