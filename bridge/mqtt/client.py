@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import itertools
 import logging
 import math
 import socket
@@ -72,7 +71,6 @@ OFFLINE = b"offline"
 _UNSUPPORTED_PROTOCOL_VERSION = 0x84  # CONNACK reason code (3.1.1 return code 1 maps to it)
 _TIMEOUT = 10.0  # seconds for CONNACK, PUBACK, SUBACK, UNSUBACK
 _CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
-BURST = 100  # publishes publish_many has waiting at once
 FAREWELL_TIMEOUT = 5.0  # seconds for the farewell messages and the goodbye, at most
 _FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
@@ -361,22 +359,22 @@ class MqttClient:
             raise MqttDisconnectedError(f"publish to {topic[:200]}: connection lost")
 
     async def publish_many(self, messages: Iterable[tuple[str, str | bytes, bool]]) -> None:
-        """Publish (topic, payload, retain) messages at once and wait for their
-        acknowledgements together, ``BURST`` at a time: a burst (the whole state after a
-        reconnect) costs a round trip per ``BURST`` messages, not one per message, and
-        never holds thousands of waiting publishes at once."""
-        pending = iter(messages)
-        while chunk := list(itertools.islice(pending, BURST)):
-            # gather, not a TaskGroup: on Python 3.11 a TaskGroup whose task fails while it
-            # waits leaves its parent task marked as cancelling for good (fixed in 3.12),
-            # and the reconnect loop must go on after a lost connection
-            results = await asyncio.gather(
-                *(self.publish(topic, payload, retain=retain) for topic, payload, retain in chunk),
-                return_exceptions=True,
-            )
-            for result in results:
-                if isinstance(result, BaseException):
-                    raise result
+        """Publish (topic, payload, retain) messages all at once and wait for every
+        acknowledgement together: a burst (the whole state after a reconnect) costs one
+        round trip, not one per message. All of them are handed to the connection before
+        anything else may publish: sent in parts, a later part could overtake a newer
+        message on the same topic (an ``offline`` sent meanwhile, then the burst's
+        ``online``)."""
+        # gather, not a TaskGroup: on Python 3.11 a TaskGroup whose task fails while it
+        # waits leaves its parent task marked as cancelling for good (fixed in 3.12), and
+        # the reconnect loop must go on after a lost connection
+        results = await asyncio.gather(
+            *(self.publish(topic, payload, retain=retain) for topic, payload, retain in messages),
+            return_exceptions=True,
+        )
+        for result in results:
+            if isinstance(result, BaseException):
+                raise result
 
     async def subscribe(self, *filters: str, qos: int = 1, live_only: bool = False) -> None:
         """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused.
