@@ -142,11 +142,11 @@ class Dispatcher:
 
     async def _run(self, command: Command) -> None:
         device_id = command.device_id
-        poller = self.engine.devices.get(device_id)
-        if poller is None:
+        if device_id not in self.engine.devices:
             self._fail(command, "no such device")
             return
         async with self._locks.setdefault(device_id, asyncio.Lock()):
+            poller = self.engine.devices[device_id]  # now: a mapping reload may have replaced it
             if time.monotonic() > command.expires:
                 poller.writes.expired += 1
                 self._fail(command, "expired: not executed within the command expiry")

@@ -98,7 +98,8 @@ class DeviceWriter:
         if not plan:
             return held  # every key unchanged (EEPROM, a toggle in place): nothing to write
         writes = frames_of(plan, {p.key for p in points if p.entity.pulse})
-        retries = self.poller.retries if all(p.entity.idempotent for p in points) else 0
+        resendable = all(p.entity.idempotent and p.state_source is None for p in points)
+        retries = self.poller.retries if resendable else 0  # a toggle is never resent
         request: Write | WriteSequence = (
             writes[0]
             if len(writes) == 1
@@ -135,10 +136,11 @@ class DeviceWriter:
         return {p.key: held[p.key] for p in points}
 
     def inherit(self, earlier: DeviceWriter) -> None:
-        """Keep the spacing of the writer this one replaces (a mapping reload): a toggle or
-        an EEPROM parameter written just before is not written again sooner for it."""
-        self.counters.last_write.update(earlier.counters.last_write)
-        self.counters.last_attempt.update(earlier.counters.last_attempt)
+        """Share the spacing of the writer this one replaces (a mapping reload): a toggle or
+        an EEPROM parameter written just before, or by a command still running on the
+        earlier writer, is not written again sooner for it."""
+        self.counters.last_write = earlier.counters.last_write
+        self.counters.last_attempt = earlier.counters.last_attempt
 
     def _allowed(self, items: dict[str, object]) -> list[Point]:
         """The points of a command, each known, writable and not guarded; else nothing."""

@@ -4,6 +4,7 @@ that went out, a mapping reload keeps it, and a lock the bridge would undo is re
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import time
 from collections.abc import AsyncIterator
@@ -12,10 +13,10 @@ from pathlib import Path
 import pytest
 
 from bridge.core.mapping import load_mapping
-from bridge.errors import CommandExpiredError, CommandRejectedError
+from bridge.errors import CommandExpiredError, CommandRejectedError, DeviceTimeoutError
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
-from bridge.modbus.simulator import SimulatedUnit, Simulator
+from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 from tests.integration.harness import config, running, serving_tcp, simulator, tcp_bus
 from tests.integration.test_seed_behaviours import (
     GEN_TOGGLE,
@@ -145,3 +146,48 @@ async def test_write_spacing_is_kept_per_coil_and_per_register(tmp_path: Path) -
         ("coil", 5, (0xFF00,)),
         ("holding", 5, (7,)),
     ]
+
+
+TOGGLE = """
+manufacturer: Test
+model: Toggle
+description: a breaker toggle whose mapping forgot idempotent false
+source: {title: test}
+entities:
+  breaker: {name: Breaker, address: 5, table: coil, access: w, toggle_of: closed}
+  closed: {name: Closed, address: 7, table: coil}
+"""
+
+
+@pytest.mark.asyncio
+async def test_a_toggle_is_never_resent_even_if_its_mapping_says_idempotent(
+    tmp_path: Path,
+) -> None:
+    """The unit acts on the toggle but answers after the timeout: with the bus's retries a
+    resend would flip the breaker back. A ``toggle_of`` entity is sent once, whatever its
+    ``idempotent`` says."""
+    path = tmp_path / "toggle.yaml"
+    path.write_text(TOGGLE)
+    sim = Simulator([SimulatedUnit(1, load_mapping(path), quirks=Quirks(write_latency=0.5))])
+    async with serving_tcp(sim) as port:
+        unit = {"id": "toggle", "bus": "tcp", "unit": 1, "mapping": str(path)}
+        engine = Engine(config([tcp_bus(port, timeout=0.3, retries=1)], [unit]))
+        async with running(engine, pollers=False):
+            with pytest.raises(DeviceTimeoutError):
+                await engine.devices["toggle"].write_many({"breaker": True})
+            await asyncio.sleep(0.8)  # a resend would have reached the unit by now
+    assert [(w.table.value, w.address) for w in writes_to(sim, 1)] == [("coil", 5)]
+
+
+@pytest.mark.asyncio
+async def test_a_toggle_sent_by_the_replaced_poller_holds_up_the_new_one() -> None:
+    """A command still running on the poller a reload replaced toggles the breaker: the
+    new poller's next toggle within 2 s is refused (they share the spacing)."""
+    async with manual_genset() as (sim, engine, genset):
+        reloaded = await engine.replace_mapping(SMARTGEN, genset.mapping)
+        await reloaded.read_now()
+        await genset.write_many({"generator_breaker": True})  # the earlier poller
+        with pytest.raises(CommandRejectedError) as caught:
+            await reloaded.write_many({"generator_breaker": False})
+        assert "not again within 2 s" in caught.value.reason("generator_breaker")
+        assert [w.address for w in writes_to(sim, 1)] == [GEN_TOGGLE]
