@@ -291,9 +291,9 @@ class DeviceWriter:
             unlock.lock, protocol.addressing
         ):
             raise ValueRejectedError(
-                f"{point.key} would lock {device.id}, which the bridge unlocks again at once "
-                "with the password in its config: lock it at the panel, or remove "
-                f"devices.{device.id}.password_* first"
+                f"{point.key} would lock {device.id}, and the bridge unlocks it again on its "
+                "next request with the password in its config: to keep it locked, remove "
+                f"devices.{device.id}.password (or password_file, password_env) first"
             )
 
     def _check_unguarded(
