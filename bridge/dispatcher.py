@@ -8,8 +8,9 @@ work to a task, so the MQTT message loop is never held up by a device or a flood
   ``MAX_PAYLOAD`` bytes, before it is parsed.
 * ``/set``: every key of one message is one command, validated whole and written all or
   nothing (``DevicePoller.write_many``). Its expiry is the earlier of
-  ``mqtt.command_expiry`` and the publisher's MQTT 5 message expiry; the scheduler checks
-  it right before the first frame is sent. Commands run per device in arrival order; at
+  ``mqtt.command_expiry`` and the publisher's MQTT 5 message expiry, counted from the
+  message's arrival (it may wait unread while a session starts); the scheduler checks it
+  right before the first frame is sent. Commands run per device in arrival order; at
   most ``MAX_WAITING`` wait per device, more are refused as busy.
 * ``/get``: at most one read waits per device; a ``/get`` arriving meanwhile joins it.
   A device is read on request at most once per ``GET_INTERVAL`` seconds, so a flood of
@@ -109,7 +110,8 @@ class Dispatcher:
             self._refuse(device_id, key, message.payload, str(exc))
             return
         expiry = self.expiry if message.expiry is None else min(self.expiry, message.expiry)
-        self._set(Command(device_id, items, now, now + expiry))
+        arrived = now if message.received is None else min(now, message.received)
+        self._set(Command(device_id, items, arrived, arrived + expiry))  # from its arrival
 
     def _refuse(self, device_id: str, key: str | None, value: object, reason: str) -> None:
         self.counters.refused += 1

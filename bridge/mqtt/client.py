@@ -89,6 +89,7 @@ class Message:
     duplicate: bool
     mid: int | None  # the packet identifier of a QoS 1/2 delivery, None for QoS 0
     expiry: float | None = None  # MQTT 5 message expiry: seconds it has left, None: none
+    received: float | None = None  # time.monotonic() when it arrived (it may wait unread)
 
 
 class _Received(aiomqtt.Message):
@@ -105,6 +106,7 @@ class _Received(aiomqtt.Message):
             properties,
         )
         self.duplicate = bool(message.dup)
+        self.received = time.monotonic()
 
 
 class _Connection(aiomqtt.Client):
@@ -501,6 +503,7 @@ def _message(received: aiomqtt.Message) -> Message:
         duplicate=isinstance(received, _Received) and received.duplicate,
         mid=received.mid if received.qos > 0 else None,
         expiry=float(expiry) if isinstance(expiry, int) else None,
+        received=received.received if isinstance(received, _Received) else None,
     )
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import socket
+import time
 from collections.abc import AsyncIterator, Awaitable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -64,8 +65,10 @@ async def test_publish_subscribe_round_trip(mosquitto: Broker, version: str) -> 
         assert client.protocol == version
         await client.subscribe("t/in/#", "t/other")
         async with watcher(mosquitto.url) as other:
+            sent = time.monotonic()
             await other.publish("t/in/x", "hello")
         message = await next_message(client)
+    assert message.received is not None and sent <= message.received <= time.monotonic()
     assert (message.topic, message.payload, message.qos, message.retain) == (
         "t/in/x",
         b"hello",

@@ -107,7 +107,9 @@ async def test_a_lock_the_bridge_would_undo_at_once_is_refused(
             if with_password:
                 with pytest.raises(CommandRejectedError) as caught:
                     await drive.write_many({"lock_parameters": "PRESS"})
-                assert "unlocks it again on its next request" in caught.value.reason("lock_parameters")
+                assert "unlocks it again on its next request" in caught.value.reason(
+                    "lock_parameters"
+                )
                 assert writes_to(sim, 1) == []
             else:
                 await drive.write_many({"lock_parameters": "PRESS"})
