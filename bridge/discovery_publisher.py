@@ -216,15 +216,20 @@ class DiscoveryPublisher:
             log.warning("%d stale discovery config(s) not removed: %s", len(failed), failed[0])
 
     async def _stale(self, client: MqttClient, current: set[str]) -> set[str]:
-        """The configs to empty: retained ones of ours and recorded ones, not in ``current``."""
+        """The configs to empty, not in ``current``: retained ones of ours, and recorded
+        ones, except those the broker shows holding another's config (any client may
+        overwrite the record: it must not empty another integration's configs). A broker
+        that sends no retained message to wildcards (RabbitMQ) shows none: there the
+        record is all there is to go by."""
         prefix = self.topics.discovery_prefix
         found: dict[str, bytes] = {}
-        for pattern in (f"{prefix}/device/+/config", f"{prefix}/+/+/+/config"):
+        for pattern in (f"{prefix}/+/+/config", f"{prefix}/+/+/+/config"):
             found |= await client.retained(pattern, keep=lambda topic: topic not in current)
-        stale = {t for t, payload in found.items() if payload and self._ours(payload)}
+        ours = {t for t, payload in found.items() if payload and self._ours(payload)}
+        others = found.keys() - ours
         recorded = await client.retained(self.topics.bridge_discovery)
-        stale |= recorded_topics(recorded.get(self.topics.bridge_discovery, b""), prefix)
-        return stale - current
+        listed = recorded_topics(recorded.get(self.topics.bridge_discovery, b""), prefix)
+        return (ours | (listed - others)) - current
 
     def _ours(self, payload: bytes) -> bool:
         """True when a retained config names a device of this bridge. Any client may

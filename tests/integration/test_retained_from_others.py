@@ -88,9 +88,33 @@ NOT_PUBLISHABLE = [
 @pytest.mark.asyncio
 async def test_a_record_of_topics_that_cannot_be_published_is_skipped(mosquitto: Broker) -> None:
     record = json.dumps([*NOT_PUBLISHABLE, OLD])
-    foreign = json.dumps({"device": {"identifiers": ["zigbee2mqtt_0x1"]}})
-    retained = await swept(mosquitto, {"modbus/bridge/discovery": record, OLD: foreign})
+    retained = await swept(mosquitto, {"modbus/bridge/discovery": record, OLD: json.dumps(OURS)})
     assert retained[OLD] == b""
+
+
+ZIGBEE = "homeassistant/light/0x1/light/config"
+ZIGBEE_DEVICES = "homeassistant/sensor/0x2/config"  # a config without a node id
+
+
+@pytest.mark.asyncio
+async def test_a_record_naming_another_integration_s_configs_does_not_empty_them(
+    mosquitto: Broker,
+) -> None:
+    """A client rewrites the record to list Zigbee configs: the broker shows them holding
+    another integration's device, so they stay; our own stale config is still emptied."""
+    foreign = json.dumps({"device": {"identifiers": ["zigbee2mqtt_0x1"]}})
+    record = json.dumps([ZIGBEE, ZIGBEE_DEVICES, OLD])
+    retained = await swept(
+        mosquitto,
+        {
+            "modbus/bridge/discovery": record,
+            ZIGBEE: foreign,
+            ZIGBEE_DEVICES: foreign,
+            OLD: json.dumps(OURS),
+        },
+    )
+    assert retained[OLD] == b""
+    assert retained[ZIGBEE] == foreign.encode() == retained[ZIGBEE_DEVICES]
 
 
 def test_a_record_gives_its_first_topics_only() -> None:
