@@ -26,6 +26,7 @@ import contextlib
 import functools
 import json
 import logging
+import time
 from collections import deque
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -61,6 +62,7 @@ log = logging.getLogger(__name__)
 Outgoing = tuple[str, str, bool]  # topic, payload, retain
 OUTBOX = 200  # non-retained messages kept while the broker is away
 HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
+HA_REPUBLISH_GAP = 30.0  # seconds at least between two republishes Home Assistant asks for
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
 STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
 
@@ -181,12 +183,16 @@ class Bridge:
             await self._flush(client)
 
     async def _home_assistant_returns(self, client: MqttClient) -> None:
-        """Discovery and state again after Home Assistant says ``online``: once per
-        ``HA_SETTLE`` seconds however many come (a flood of ``online`` is one republish)."""
+        """Discovery and state again after Home Assistant says ``online``: ``HA_SETTLE``
+        seconds after it, however many come, and at most once per ``HA_REPUBLISH_GAP``
+        (anyone may publish ``online``: a sustained flood must not keep the bridge
+        republishing everything)."""
+        last = -HA_REPUBLISH_GAP
         while True:
             await self._ha_online.wait()
-            await asyncio.sleep(HA_SETTLE)
+            await asyncio.sleep(max(HA_SETTLE, last + HA_REPUBLISH_GAP - time.monotonic()))
             self._ha_online.clear()
+            last = time.monotonic()
             log.info("Home Assistant is online: publishing discovery and state again")
             await self.discovery.publish(client)
             await self._publish_everything(client)

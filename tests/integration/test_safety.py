@@ -22,6 +22,7 @@ import pytest
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
+from bridge import app as app_module
 from bridge.app import Bridge
 from bridge.core.entity import Table
 from bridge.core.mapping import builtin_mapping_path, load_mapping
@@ -321,6 +322,32 @@ async def test_a_flood_of_home_assistant_online_neither_delays_commands_nor_mult
         configs = [m for m in observer.log[seen:] if m.topic.startswith("homeassistant/device/")]
 
         assert len(configs) <= 3 * len(UNITS)  # one republish (plus one that was pending)
+
+
+@pytest.mark.asyncio
+async def test_a_sustained_flood_of_home_assistant_online_republishes_once_per_gap(
+    mosquitto: Broker, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``online`` every 0.2 s for 3 s: one republish at its start, then none until
+    ``HA_REPUBLISH_GAP`` (shortened to 2.5 s here) has passed since it."""
+    monkeypatch.setattr(app_module, "HA_REPUBLISH_GAP", 2.5)
+    sim = all_units()
+    config = "homeassistant/device/vacon_nx/config"
+    async with (
+        observing(mosquitto, "modbus/#", "homeassistant/device/#") as observer,
+        bridged(mosquitto, sim),
+    ):
+        await all_online(observer)
+        await eventually(lambda: config in observer.retained)
+        await asyncio.sleep(0.5)
+        seen = len(observer.log)
+        async with raw_client(mosquitto) as flooder:
+            for _ in range(15):
+                await flooder.publish("homeassistant/status", "online", qos=0)
+                await asyncio.sleep(0.2)
+        await asyncio.sleep(1.0)  # the republish the gap let through at its end
+        sent = [m for m in observer.log[seen:] if m.topic == config]
+        assert len(sent) == 2  # at the start, and once the gap had passed
 
 
 # --- 5. a compound write is never left half done ----------------------------------------
