@@ -93,7 +93,7 @@ class Bridge:
             self.mqtt.command_expiry,
             spawn=self._spawn,
             error=self._error,
-            read=self._read_done,
+            read=self._publish_state,
         )
         self._requests = 0  # management requests running
         self._group: asyncio.TaskGroup | None = None
@@ -339,11 +339,11 @@ class Bridge:
         it applies a changed payload in the background, and a state that arrived first (a
         code now in the options, a number now in range) would have been dropped."""
         await asyncio.sleep(STATE_AFTER_DISCOVERY)
-        self._dirty.setdefault(device_id, set())
-        self._wake.set()
+        self._publish_state(device_id)
 
-    def _read_done(self, device_id: str) -> None:
-        """A read on request finished: publish the device's state (changed or not)."""
+    def _publish_state(self, device_id: str) -> None:
+        """Have the publisher send the device's state (changed or not): after a read on
+        request, or after Home Assistant took a new discovery payload."""
         self._dirty.setdefault(device_id, set())
         self._wake.set()
 
