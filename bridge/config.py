@@ -469,11 +469,11 @@ def _errors_of_valid_parts(data: dict[str, Any], path: Path) -> list[str]:
     invalid = {b.get("id") for b in raw_buses if isinstance(b, dict)} - valid_ids
     errors = reference_errors(buses, devices, invalid_buses={str(i) for i in invalid})
     mappings, more = _load_mappings(buses, devices, path.parent)
-    errors += more
+    errors += more + _device_password_errors(devices, mappings)
     if mqtt is not None:
         errors += secret_errors(mqtt) + topic_errors(mqtt, devices, mappings)
     if bridge is not None:
-        errors += folder_errors(bridge, path.parent)
+        errors += folder_errors(bridge, path.parent) + _web_token_errors(bridge.web)
     return errors
 
 

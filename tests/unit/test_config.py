@@ -359,6 +359,19 @@ def test_a_password_file_that_is_not_text_is_no_password(tmp_path: Path) -> None
     assert drive.password_value() is None
 
 
+def test_password_and_token_problems_are_reported_beside_invalid_fields(tmp_path: Path) -> None:
+    """One ``check`` run says everything: an invalid field elsewhere does not hide them."""
+    text = (
+        "mqtt: {qos: 3}\n"
+        + DRIVE % "password: 'secret'"
+        + "bridge: {web: {enabled: true, token_env: NOT_SET_IN_TESTS_WEB}}\n"
+    )
+    rows = issues(tmp_path, text)
+    assert any(r.startswith("mqtt.qos: ") for r in rows), rows
+    assert "devices.drive.password: the password must be a number 0..65535" in rows
+    assert any(r.startswith("bridge.web.token_env: the token is missing") for r in rows), rows
+
+
 def test_a_password_needs_a_mapping_that_unlocks(tmp_path: Path) -> None:
     rows = issues(tmp_path, BASE.replace("mapping: t1.yaml", "mapping: t1.yaml, password: '1'"))
     assert rows == ("devices.pump.password: the mapping t1.yaml has no password unlock",)
