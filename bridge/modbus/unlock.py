@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
+import time
 from collections.abc import Awaitable, Callable
 
 from bridge.config import DeviceConfig, is_register_number
@@ -43,7 +45,7 @@ class Unlocker:
     def __init__(self, device: DeviceConfig, protocol: Protocol) -> None:
         self.device = device
         self.protocol = protocol
-        self.generation = 0  # unlocks done; a request remembers the one it was sent in
+        self.unlocked_at = -math.inf  # time.monotonic() when the last unlock was accepted
         self.failed: str | None = None  # why the device stays locked (then: no more tries)
         self._lock = asyncio.Lock()
 
@@ -55,13 +57,12 @@ class Unlocker:
     ) -> tuple[int, ...]:
         """``attempt()`` (one request); when the device answers ``locked``, unlock it with
         ``send`` and attempt once more. ``locked_out(reason)`` when it stays locked."""
-        seen = self.generation
         try:
             return await attempt()
         except DeviceExceptionError as exc:
             if exc.action != "locked":
                 raise
-            if not await self.unlock(seen, send):
+            if not await self.unlock(time.monotonic(), send):
                 if self.failed is not None:
                     locked_out(self.failed)
                 raise
@@ -72,13 +73,16 @@ class Unlocker:
                 locked_out(self.still_locked())
             raise
 
-    async def unlock(self, seen: int, send: Send) -> bool:
-        """After a ``locked`` answer to a request sent in generation ``seen``: True when
-        the request should be sent again (this call or another one unlocked the device)."""
+    async def unlock(self, answered: float, send: Send) -> bool:
+        """After a ``locked`` answer that came at ``answered`` (monotonic): True when the
+        request should be sent again (this call or another one unlocked the device). One
+        frame is in flight per bus, so an unlock accepted after that answer covers it; a
+        locked answer after the last unlock (the device locked again: a power cycle) needs
+        the password again, even for a request queued before that unlock."""
         async with self._lock:
             if self.failed is not None:
                 return False
-            if self.generation != seen:
+            if self.unlocked_at > answered:
                 return True  # unlocked meanwhile by another request
             return await self._write_password(send)
 
@@ -124,7 +128,7 @@ class Unlocker:
         except ModbusError as exc:  # no answer: the next locked request tries again
             log.warning("%s: unlocking failed: %s", self.device.id, exc)
             return False
-        self.generation += 1
+        self.unlocked_at = time.monotonic()
         if spec.success is None or (echo and echo[0] == spec.success):
             log.info("%s: unlocked with its password", self.device.id)
         else:

@@ -3,6 +3,8 @@ the password write scripted: ``send`` is the bus the poller hands the unlocker."
 
 from __future__ import annotations
 
+import asyncio
+
 import pytest
 
 from bridge.config import DeviceConfig
@@ -88,3 +90,25 @@ async def test_a_configured_password_that_cannot_be_read_is_said_so() -> None:
     assert await ask(unlocker, device) is None
     assert device.writes == []
     assert "devices.drive.password_* cannot be read now" in device.lockouts[0]
+
+
+@pytest.mark.asyncio
+async def test_a_request_answered_locked_after_a_relock_writes_the_password_again() -> None:
+    """A request queued before another one's unlock but answered after the drive locked
+    again (a power cycle) is not covered by that unlock: the password goes again, and the
+    drive is not declared locked for good."""
+    device = Drive((0x8888,), (0x8888,))
+    unlocker = Unlocker(drive(password="12345"), P2)
+    gate = asyncio.Event()
+
+    async def queued() -> tuple[int, ...]:  # waits its turn on the bus
+        await gate.wait()
+        return await device.request()
+
+    late = asyncio.create_task(unlocker.submit(queued, device.send, device.lockouts.append))
+    await asyncio.sleep(0)
+    assert await ask(unlocker, device) == (1,)  # locked, unlocked, answered
+    device.unlocked = False  # power cycle: locked again
+    gate.set()
+    assert await late == (1,)
+    assert len(device.writes) == 2 and device.lockouts == []
