@@ -43,7 +43,7 @@ import socket
 import ssl
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any, Self
 from urllib.parse import urlsplit
@@ -89,7 +89,8 @@ class Message:
     duplicate: bool
     mid: int | None  # the packet identifier of a QoS 1/2 delivery, None for QoS 0
     expiry: float | None = None  # MQTT 5 message expiry: seconds it has left, None: none
-    received: float | None = None  # time.monotonic() when it arrived (it may wait unread)
+    # time.monotonic() when it arrived (it may wait unread); not part of what it says
+    received: float | None = field(default=None, compare=False)
 
 
 class _Received(aiomqtt.Message):
