@@ -18,7 +18,7 @@ from bridge.core.state import alarm_active
 from bridge.errors import ConfigError
 from bridge.web import page_url
 from bridge.web.access import Access, change_refusal
-from bridge.web.http import BadRequestError, Request, parse_head
+from bridge.web.http import Request
 from bridge.web.live import MAX_PENDING, WebFeed
 from bridge.web.views import BusWindow
 
@@ -122,35 +122,6 @@ def test_only_the_page_itself_may_change_anything(
 ) -> None:
     refusal = change_refusal(post(**headers), proxied=proxied)
     assert (refusal.status if refusal else None) == status
-
-
-# --- the request head -------------------------------------------------------------------
-
-
-def test_a_request_head_is_parsed_whole() -> None:
-    head = (
-        b"POST /api/devices/a%2Fb?device=x&device=y HTTP/1.1\r\n"
-        b"Host: h\r\nContent-Type:application/json\r\nContent-Length: 12\r\n\r\n"
-    )
-    parsed, length = parse_head(head, "10.0.0.1")
-    assert parsed == Request(
-        "POST",
-        "/api/devices/a/b",
-        {"device": "y"},
-        {"host": "h", "content-type": "application/json", "content-length": "12"},
-        peer="10.0.0.1",
-    )
-    assert length == 12
-
-
-def test_too_many_query_fields_are_refused() -> None:
-    target = "/?" + "&".join(f"k{i}=1" for i in range(50))
-    with pytest.raises(BadRequestError, match="Max number of fields"):
-        parse_head(f"GET {target} HTTP/1.1\r\n\r\n".encode())
-    with pytest.raises(BadRequestError, match="Invalid IPv6"):
-        parse_head(b"GET //[ HTTP/1.1\r\n\r\n")
-    with pytest.raises(BadRequestError):
-        parse_head(b"GET / HTTP/1.1\r\n Folded: header\r\n\r\n")
 
 
 # --- bridge.web settings ----------------------------------------------------------------
