@@ -23,6 +23,9 @@ before calling the hook (simruntime.py:62-66), which would skip latency and quir
   16-bit word (pymodbus' own FC05 only knows on/off) and echoes it back;
 * dead units and unknown unit ids: the incoming ``trace_pdu`` hook drops the request, so
   nothing is executed and nothing is sent (requesthandler.py:73 handles no empty PDU);
+* unit 0 is a device that answers every unit id no other unit has, as many Modbus TCP
+  devices and gateways do (pymodbus' SimDevice id 0, simcore.py:36); its writes are
+  recorded as unit 0;
 * ``two_byte_count``: the outgoing ``trace_packet`` hook rewrites RTU FC03 replies.
 """
 
@@ -285,8 +288,8 @@ class Simulator:
         if len(self._devices) != len(units):
             raise ValueError("unit ids must be unique")
         for spec in units:
-            if not 1 <= spec.unit <= 255:
-                raise ValueError(f"unit {spec.unit} is outside 1..255")
+            if not 0 <= spec.unit <= 255:
+                raise ValueError(f"unit {spec.unit} is outside 0..255 (0: any unit id)")
             _check_quirks(spec.quirks)
 
     @property
@@ -377,12 +380,16 @@ class Simulator:
         )
         await self._serve(server, port)
 
+    def _answering(self, unit: int) -> _Device | None:
+        """The simulated device that takes a request to ``unit``: its own, else unit 0."""
+        return self._devices.get(unit) or self._devices.get(0)
+
     def _sim_devices(self) -> list[SimDevice]:
         return [device.sim_device() for device in self._devices.values()]
 
     def _hooks(self, framer: str) -> dict[str, Any]:
         def trace_pdu(sending: bool, pdu: ModbusPDU) -> ModbusPDU | None:
-            device = self._devices.get(pdu.dev_id)
+            device = self._answering(pdu.dev_id)
             if sending or (device is not None and not device.quirks.dead):
                 return pdu
             return None  # dropped: transaction.py:273 keeps None, nothing is answered
@@ -390,7 +397,7 @@ class Simulator:
         def trace_packet(sending: bool, packet: bytes) -> bytes:
             if not sending or framer != "rtu" or len(packet) < 5 or packet[1] != 3:
                 return packet
-            device = self._devices.get(packet[0])
+            device = self._answering(packet[0])
             if device is None or not device.quirks.two_byte_count:
                 return packet
             return two_byte_count_frame(packet)

@@ -349,6 +349,19 @@ async def test_two_units_on_one_tcp_port() -> None:
 
 
 @pytest.mark.asyncio
+async def test_unit_0_answers_every_unit_id_no_other_unit_has() -> None:
+    """A Modbus TCP device that ignores the unit id (pymodbus' SimDevice id 0)."""
+    sim = simulator((0, "p2_vfd"), (3, "soft_starter"))
+    async with tcp(sim, timeout=0.3) as conn:
+        for unit in (1, 2, 247, 255):
+            assert await read(conn, Table.HOLDING, 0x3000, unit=unit) == (1,)  # running_forward
+        assert await read(conn, Table.HOLDING, 0x1031, unit=3) == (12,)  # its own unit
+        assert not (await call(conn, Write(6, Table.HOLDING, 0x2000, (6,)), unit=255)).isError()
+    assert sim.writes == [(0, Write(6, Table.HOLDING, 0x2000, (6,)))]
+    assert sim.image(0)[(Table.HOLDING, 0x2000)] == 6
+
+
+@pytest.mark.asyncio
 async def test_two_units_on_one_serial_line() -> None:
     sim = simulator((1, "smartgen_hgm6100"), (5, "soft_starter"))
     async with serial(sim) as conn:
