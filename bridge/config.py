@@ -240,6 +240,15 @@ class TcpBus(_BusBase):
             "planned for the least time on that line, not on the network"
         ),
     )
+    raw_units: list[Annotated[int, Field(ge=1, le=255)]] = Field(
+        default_factory=list,
+        description=(
+            "units no device is configured at that raw writes (bridge/request/device/write) "
+            "may address on this bus; other such units, 255 included, are refused, as a "
+            "gateway or a device that ignores the unit id may answer them; the guards of "
+            "every device on the bus still apply"
+        ),
+    )
 
 
 Bus = Annotated[SerialBus | TcpBus, Field(discriminator="transport")]
@@ -371,7 +380,10 @@ class ManagementConfig(_Strict):
         60.0, description="publish <base>/bridge/health this often; 0 turns it off"
     )
     allow_raw_writes: bool = Field(
-        False, description="permit bridge/request/device/write (raw register writes)"
+        False,
+        description="permit bridge/request/device/write (raw register writes) and raw reads "
+        "of secret registers; a register guarded by any device that may answer the unit "
+        "still needs that device's allow_dangerous_writes",
     )
     scan_timeout: Duration = Field(
         0.2, gt=0, le=5, description="per-unit answer timeout of device/scan"

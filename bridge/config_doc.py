@@ -123,6 +123,12 @@ Rules the tables below do not show:
   relative to the config file's folder, like mapping paths; `check` says when one is
   missing.
 - A mapping that does not list `ascii` in its transports cannot be put on an `ascii` bus.
+- **Raw reads and writes** keep the guards of every device that may answer the unit they
+  name: on a serial line, the device configured at that unit; on a TCP bus (a gateway, or
+  a device that ignores the unit id), the device configured at that unit, and for unit
+  255 or a unit no device is configured at, every device on the bus. On a TCP bus a raw
+  write to a unit no device is configured at is refused unless the bus's `raw_units`
+  names it.
 """
 
 EXAMPLE = """\
@@ -300,7 +306,10 @@ def _array_type(items: Schema, root: Schema) -> str:
         return f"list of buses: {links}"
     if "$ref" in items:
         return f"list, see [{_ref_title(items['$ref'])}](#{_ref_anchor(items['$ref'])})"
-    return f"list of {items.get('type', 'any')}"
+    kind = items.get("type", "any")
+    if "minimum" in items or "maximum" in items:
+        return f"list of {kind} ({items.get('minimum', '')}..{items.get('maximum', '')})"
+    return f"list of {kind}"
 
 
 _ANCHORS = {

@@ -140,6 +140,14 @@ devices:
             "devices.pump.poll.fast: invalid duration 'soon'",
         ),
         (("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, parity: X"), "buses.rs485.rtu.parity"),
+        (  # a serial unit is one device: no unit to open for raw writes
+            ("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, raw_units: [5]"),
+            "buses.rs485.rtu.raw_units: Extra inputs are not permitted",
+        ),
+        (
+            ("transport: rtu, port: /dev/ttyUSB0", "transport: tcp, host: h, raw_units: [5, 0]"),
+            "buses.rs485.tcp.raw_units.1: Input should be greater than or equal to 1",
+        ),
     ],
 )
 def test_errors_name_the_path(tmp_path: Path, change: tuple[str, str], expected: str) -> None:
