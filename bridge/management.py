@@ -10,10 +10,14 @@ scan probes queue with them (a scan of a busy bus does not stop its devices' pol
 Limits, checked before anything is queued: one scan per bus at a time and ``MAX_RAW``
 raw reads or writes waiting per bus (more are answered "busy"); unit 0 (broadcast) is
 never addressed, serial lines only 1..247. Registers a device's mapping guards stay
-guarded for raw access too: a raw write to a dangerous register needs the device's
+guarded for raw access too, whatever unit a request names (bridge/core/reach.py): the
+guards of every configured device that may answer the unit apply (on a TCP bus a gateway,
+or a device that ignores the unit id, answers 255 and units no device is configured at as
+any device there). A raw write to a dangerous register needs that device's
 ``allow_dangerous_writes``, a raw read of a secret or write-only one
-``bridge.allow_raw_writes``. A mapping switch (``mapping/reload`` with ``mapping``) needs
-``bridge.mapping_switch`` and takes only shipped names or files under
+``bridge.allow_raw_writes``; on a TCP bus a raw write to a unit no device is configured at
+needs the bus's ``raw_units`` to name it. A mapping switch (``mapping/reload`` with
+``mapping``) needs ``bridge.mapping_switch`` and takes only shipped names or files under
 ``bridge.mapping_dirs``; a refused path is answered without a word about the file.
 """
 
@@ -31,9 +35,11 @@ from bridge.config import (
     DeviceConfig,
     LoadedConfig,
     SerialBus,
+    TcpBus,
     config_schema,
     load_device_mapping,
 )
+from bridge.core.guard import Guard
 from bridge.core.management_request import (
     MAX_UNIT,
     REQUESTS,
@@ -54,6 +60,7 @@ from bridge.core.mapping import (
     builtin_mapping_names,
     mapping_schema,
 )
+from bridge.core.reach import Neighbour, Reach, check_raw_read, check_raw_write, reach_of
 from bridge.errors import BridgeError, ModbusError
 from bridge.modbus.commission import (
     explain,
@@ -167,17 +174,31 @@ class Management:
             raise RequestError(f"bus: no bus {bus_id!r} (have {sorted(schedulers)})")
         return schedulers[bus_id]
 
+    def _reach(self, scheduler: BusScheduler, unit: int) -> Reach:
+        """The configured devices (disabled ones too: they are wired) that may answer
+        ``unit`` on that bus, each with its guard."""
+        bus = scheduler.transport.bus
+        neighbours = []
+        for configured in self.loaded.config.devices:
+            if configured.bus != bus.id:
+                continue
+            poller = self.engine.devices.get(configured.id)
+            if poller is not None:  # its guard holds what earlier mappings guarded too
+                device, guard = poller.device, poller.guard
+            else:
+                device = configured
+                guard = _guard_of(device, self.loaded.mappings[device.id])
+            neighbours.append(
+                Neighbour(device.id, device.unit, guard, device.allow_dangerous_writes)
+            )
+        return reach_of(bus.id, unit, neighbours, tcp=isinstance(bus, TcpBus))
+
     async def _read(self, request: DeviceRead) -> dict[str, Any]:
         scheduler, unit, timeout = self._target(request)
         read = raw_read(request.table, request.address, request.count)
+        reach = self._reach(scheduler, unit)
+        check_raw_read(reach, read, secrets_allowed=self.settings.allow_raw_writes)
         device = self._device_at(scheduler, unit)
-        hidden = device.guard.hidden_in(read.table, read.address, read.count) if device else []
-        if hidden and not self.settings.allow_raw_writes:
-            raise RequestError(
-                f"{device.device.id if device else unit}: addresses {_listed(hidden)} hold "
-                "secret or write-only values; raw reads of them need "
-                "bridge.allow_raw_writes: true"
-            )
         limit = device.limits().max_count(read.table) if device is not None else None
         async with self._raw_slot(scheduler):
             reading = await read_interpreted(
@@ -192,14 +213,9 @@ class Management:
             )
         scheduler, unit, timeout = self._target(request)
         write = raw_write(request.table, request.address, request.values)
-        device = self._device_at(scheduler, unit)
-        if device is not None and not device.device.allow_dangerous_writes:
-            guarded = device.guard.dangerous_in(write.table, write.address, write.values)
-            if guarded:
-                raise RequestError(
-                    f"{device.device.id}: addresses {_listed(guarded)} are guarded "
-                    "(dangerous); set allow_dangerous_writes: true for the device to permit it"
-                )
+        bus = scheduler.transport.bus
+        raw_units = bus.raw_units if isinstance(bus, TcpBus) else ()
+        check_raw_write(self._reach(scheduler, unit), write, raw_units)
         async with self._raw_slot(scheduler):
             await scheduler_submit(scheduler, Priority.WRITE)(unit, write, timeout)
         return {
@@ -355,6 +371,9 @@ def _schemas() -> dict[str, Any]:
     return {"config_schema": config_schema(), "mapping_schema": mapping_schema()}
 
 
-def _listed(addresses: list[int]) -> str:
-    shown = ", ".join(str(a) for a in addresses[:8])
-    return shown + (f" and {len(addresses) - 8} more" if len(addresses) > 8 else "")
+def _guard_of(device: DeviceConfig, mapping: Mapping) -> Guard:
+    """The guard of a device the engine does not poll (disabled), from its mapping."""
+    options = tuple(sorted((mapping.default_options() | device.options).items()))
+    return mapping.memo(
+        ("guard", options), lambda: Guard.of(mapping.points(device.options).values())
+    )
