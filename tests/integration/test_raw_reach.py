@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,8 @@ from bridge.app import Bridge
 from bridge.config import load_config_data
 from bridge.core.entity import Table
 from bridge.core.request import Write
+from bridge.management import Management
+from bridge.modbus.engine import Engine
 from bridge.modbus.simulator import Simulator
 from tests.integration.harness import cancel, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
@@ -193,3 +196,31 @@ async def test_the_web_page_refuses_the_same_raw_writes(mosquitto: Broker, tmp_p
         await asyncio.sleep(0.3)
         assert sim.writes == []
         assert held(sim) == before
+
+
+@pytest.mark.asyncio
+async def test_a_disabled_device_keeps_its_guard(tmp_path: Path) -> None:
+    """A device the config disables is still wired: raw writes that may reach it keep its
+    guard (refused before anything reaches the bus, so no bus is needed)."""
+    data = {
+        "bridge": {"allow_raw_writes": True},
+        "buses": [{"id": "tcp1", "transport": "tcp", "host": "127.0.0.1", "tcp_port": 1}],
+        "devices": [
+            {"id": "drive", "bus": "tcp1", "unit": 1, "mapping": "p2_vfd"},
+            {"id": "spare", "bus": "tcp1", "unit": 2, "mapping": "p2_vfd", "enabled": False},
+        ],
+    }
+    loaded = load_config_data(data, tmp_path / "config.yaml")
+    engine = Engine(loaded)  # not running
+
+    async def reloaded(_: list[str]) -> None:
+        raise AssertionError("nothing to reload")
+
+    management = Management(loaded, engine, on_reload=reloaded, mqtt_state=lambda: "online")
+    body = json.dumps({"unit": 2} | REVERSE_RUN).encode()
+    answer = json.loads(await management.handle("device/write", body))
+    assert answer["error"] == (
+        "spare: addresses 8192 are guarded (dangerous); "
+        "set allow_dangerous_writes: true for device spare to permit it"
+    )
+    assert engine.schedulers["tcp1"].counters.transactions == 0
