@@ -274,7 +274,7 @@ class FakeSupervisor:
     """``GET /services/mqtt`` as the Supervisor answers it: 401 without the add-on's token,
     then ``answer`` (status, JSON body). Records the requests."""
 
-    def __init__(self, answer: tuple[int, dict[str, Any]]) -> None:
+    def __init__(self, answer: tuple[int, Any]) -> None:
         self.answer = answer
         self.requests: list[tuple[str, str | None]] = []
         fake = self
@@ -464,6 +464,45 @@ def test_bad_options_name_the_field_and_start_nothing(
         assert err.startswith("error: the add-on's options: 1 error(s)\n  "), err
     assert not (addon_dirs["tmp"] / "bridge.yaml").exists()
     assert "broker" not in out
+
+
+def one_line_error(err: str) -> str:
+    assert "Traceback" not in err, err
+    assert err.startswith("error: ") and err.count("\n") == 1 and err.endswith("\n"), err
+    return err
+
+
+@pytest.mark.parametrize(
+    ("answer", "problem"),
+    [
+        ({}, "no 'data'"),
+        (None, "null instead of an object"),
+        ([], "a list instead of an object"),
+        ("ok", "a string instead of an object"),
+        ({"result": "ok", "data": None}, "'data' is null"),
+        ({"result": "ok", "data": []}, "'data' is a list"),
+        ({"result": "ok", "data": {}}, "no host; no port number"),
+        ({"result": "ok", "data": {"host": "core-mosquitto", "password": "s3cret"}}, "no port number"),
+        ({"result": "ok", "data": {"port": 1883, "password": "s3cret"}}, "no host"),
+        ({"result": "ok", "data": SERVICE | {"port": "1883"}}, "no port number"),
+        ({"result": "ok", "data": SERVICE | {"username": 5, "ssl": "no"}}, "ssl is a string; username is a number"),
+    ],
+)  # fmt: skip
+def test_an_unexpected_answer_from_the_supervisor_is_one_line(
+    addon_dirs: dict[str, Path], answer: Any, problem: str
+) -> None:
+    """Said at once (no retries: asking again gets the same answer), without a value from
+    the answer (it holds the broker's password)."""
+    with FakeSupervisor((200, answer)) as supervisor:
+        code, out, err = finished(start_script(addon_dirs, pump_options(), supervisor))
+    assert code == 1, err
+    assert one_line_error(err) == (
+        f"error: the Supervisor's answer for the MQTT service is not usable ({problem}): "
+        "restart the Mosquitto broker add-on, then this add-on\n"
+    )
+    assert len(supervisor.requests) == 1
+    assert "s3cret" not in err + out
+    assert not (addon_dirs["tmp"] / "bridge.yaml").exists()
 
 
 def test_every_shipped_mapping_is_offered_in_the_translations() -> None:

@@ -13,8 +13,9 @@ add-on's options, then ``modbus-mqtt-bridge run``.
    pump.unit: ...``), write it to /tmp, and replace this process with the bridge.
 
 Exit codes: 2 the options or the config file are invalid, 1 the Supervisor has no broker
-to give (the add-on log says what to do). ``ADDON_OPTIONS``, ``ADDON_CONFIG_DIR``,
-``ADDON_GENERATED`` and ``SUPERVISOR_API`` move the paths and the API (tests do).
+to give or an answer the add-on cannot use (the add-on log says what, in one line).
+``ADDON_OPTIONS``, ``ADDON_CONFIG_DIR``, ``ADDON_GENERATED`` and ``SUPERVISOR_API`` move
+the paths and the API (tests do).
 """
 
 from __future__ import annotations
@@ -68,16 +69,54 @@ def mqtt_service() -> dict[str, Any]:
     for attempt in range(1, ATTEMPTS + 1):
         try:
             with urllib.request.urlopen(request, timeout=10) as answer:  # noqa: S310
-                return dict(json.loads(answer.read())["data"])
+                return broker_of(json.loads(answer.read()))
         except urllib.error.HTTPError as refused:
             if refused.code < 500:
                 raise AddonError(_refusal(refused), 1) from None
             reason = f"HTTP {refused.code}"
-        except (OSError, ValueError, KeyError) as failed:
+        except (OSError, ValueError) as failed:  # ValueError: not JSON (yet)
             reason = str(failed)
         print(f"the Supervisor does not answer yet ({reason}); try {attempt}/{ATTEMPTS}")
         time.sleep(3)
     raise AddonError(f"cannot reach the Supervisor at {SUPERVISOR}", 1)
+
+
+def broker_of(answer: Any) -> dict[str, Any]:
+    """The ``data`` of the Supervisor's answer, checked: AddonError (1) saying in one line
+    what is missing (never a value: the answer holds the broker's password)."""
+    data = answer.get("data") if isinstance(answer, dict) else None
+    if not isinstance(data, dict):
+        if isinstance(answer, dict):
+            raise _unusable(f"'data' is {_json_kind(data)}" if "data" in answer else "no 'data'")
+        raise _unusable(f"{_json_kind(answer)} instead of an object")
+    if problems := _broker_problems(data):
+        raise _unusable("; ".join(problems))
+    return dict(data)
+
+
+def _unusable(problem: str) -> AddonError:
+    return AddonError(
+        f"the Supervisor's answer for the MQTT service is not usable ({problem}): restart "
+        "the Mosquitto broker add-on, then this add-on",
+        1,
+    )
+
+
+def _broker_problems(data: dict[str, Any]) -> list[str]:
+    port = data.get("port")
+    problems = [] if isinstance(data.get("host"), str) and data["host"] else ["no host"]
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+        problems.append("no port number")
+    for key, kind in (("ssl", bool), ("username", str), ("password", str)):
+        if data.get(key) is not None and not isinstance(data[key], kind):
+            problems.append(f"{key} is {_json_kind(data[key])}")
+    return problems
+
+
+def _json_kind(value: Any) -> str:
+    kinds = {type(None): "null", bool: "a boolean", int: "a number", float: "a number",
+             str: "a string", list: "a list", dict: "an object"}  # fmt: skip
+    return kinds.get(type(value), type(value).__name__)
 
 
 def _refusal(refused: urllib.error.HTTPError) -> str:
