@@ -254,6 +254,33 @@ def test_a_config_file_keeps_its_settings_but_not_its_broker(
     assert config.devices[1].options == {"register_9f": "pcb_temperature"}
 
 
+def test_a_config_file_may_be_in_the_addons_folder_or_under_share(
+    run_module: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A name relative to the add-on's folder, a full path under it or under /share, or a
+    link that leads there; mapping paths are relative to the file's own folder."""
+    config, share = tmp_path / "config", tmp_path / "share"
+    (share / "modbus").mkdir(parents=True)
+    config.mkdir()
+    monkeypatch.setattr(run_module, "CONFIG_DIR", config)
+    monkeypatch.setattr(run_module, "SHARE_DIR", share)
+    own = {"buses": [{"id": "gw", "transport": "tcp", "host": "192.0.2.7"}],
+           "devices": [{"id": "meter", "bus": "gw", "unit": 2, "mapping": "meter.yaml"}]}  # fmt: skip
+    for folder in (config, share / "modbus"):
+        (folder / "bridge.yaml").write_text(yaml.safe_dump(own), encoding="utf-8")
+    (config / "shared.yaml").symlink_to(share / "modbus" / "bridge.yaml")
+    for name, folder in [
+        ("bridge.yaml", config),
+        (str(config / "bridge.yaml"), config),
+        ("sub/../bridge.yaml", config),
+        (str(share / "modbus" / "bridge.yaml"), share / "modbus"),
+        ("shared.yaml", share / "modbus"),
+    ]:
+        options = {"buses": [], "devices": [], "config_file": name}
+        data, base = run_module.bridge_config(options, SERVICE)
+        assert (base, data["devices"][0]["mapping"]) == (folder, str(folder / "meter.yaml")), name
+
+
 def test_ssl_broker_is_reached_over_mqtts(run_module: ModuleType) -> None:
     service = SERVICE | {"ssl": True, "port": 8883}
     section = run_module.mqtt_section(service, {})
@@ -321,12 +348,13 @@ def mqtt_answer(broker: Broker) -> tuple[int, dict[str, Any]]:
 
 
 NO_BROKER = (400, {"result": "error", "message": "Service not enabled"})
+A_BROKER = (200, {"result": "ok", "data": SERVICE})  # nobody listens: for what fails before
 
 
 @pytest.fixture
 def addon_dirs(tmp_path: Path) -> dict[str, Path]:
-    """/data, /config (the add-on's folder) and /tmp of an add-on container."""
-    dirs = {"data": tmp_path / "data", "config": tmp_path / "config", "tmp": tmp_path / "tmp"}
+    """/data, /config (the add-on's folder), /share and /tmp of an add-on container."""
+    dirs = {name: tmp_path / name for name in ("data", "config", "share", "tmp")}
     for folder in dirs.values():
         folder.mkdir()
     return dirs
@@ -345,6 +373,7 @@ def start_script(
     env |= {
         "ADDON_OPTIONS": str(dirs["data"] / "options.json"),
         "ADDON_CONFIG_DIR": str(dirs["config"]),
+        "ADDON_SHARE_DIR": str(dirs["share"]),
         "ADDON_GENERATED": str(dirs["tmp"] / "bridge.yaml"),
         "SUPERVISOR_API": supervisor.url if supervisor else "http://127.0.0.1:9",
         "BRIDGE_HEALTH_URL": f"http://127.0.0.1:{metrics_port or free_port()}/health",
@@ -470,6 +499,47 @@ def one_line_error(err: str) -> str:
     assert "Traceback" not in err, err
     assert err.startswith("error: ") and err.count("\n") == 1 and err.endswith("\n"), err
     return err
+
+
+OUTSIDE = "secret: a file the add-on must not read\n"
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "../outside.yaml",
+        "sub/../../outside.yaml",
+        "{tmp}/outside.yaml",
+        "/etc/passwd",
+        "link.yaml",  # a link in the add-on's folder to a file outside
+        "linked/bridge.yaml",  # a linked folder outside
+        "{tmp}/share/../outside.yaml",
+        "{tmp}/config_evil/bridge.yaml",  # a sibling whose name starts like the folder's
+    ],
+)
+def test_a_config_file_outside_the_addons_folder_and_share_is_refused(
+    addon_dirs: dict[str, Path], name: str
+) -> None:
+    tmp = addon_dirs["config"].parent
+    (tmp / "outside.yaml").write_text(OUTSIDE, encoding="utf-8")
+    (tmp / "elsewhere").mkdir()
+    (tmp / "elsewhere" / "bridge.yaml").write_text(OUTSIDE, encoding="utf-8")
+    (tmp / "config_evil").mkdir()
+    (tmp / "config_evil" / "bridge.yaml").write_text(OUTSIDE, encoding="utf-8")
+    (addon_dirs["config"] / "sub").mkdir()
+    (addon_dirs["config"] / "link.yaml").symlink_to(tmp / "outside.yaml")
+    (addon_dirs["config"] / "linked").symlink_to(tmp / "elsewhere")
+    options = {"buses": [], "devices": [], "config_file": name.format(tmp=tmp)}
+    with FakeSupervisor(A_BROKER) as supervisor:
+        code, out, err = finished(start_script(addon_dirs, options, supervisor))
+    assert code == 2, err
+    assert one_line_error(err).startswith(
+        f"error: config_file {options['config_file']!r}: not in the add-on's folder "
+        f"({addon_dirs['config']}) or under {addon_dirs['share']} (leads to "
+    ), err
+    assert "secret" not in err and "root:" not in err  # not read
+    assert not (addon_dirs["tmp"] / "bridge.yaml").exists()
+    assert "broker" not in out
 
 
 @pytest.mark.parametrize(

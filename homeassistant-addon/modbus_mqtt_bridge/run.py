@@ -6,16 +6,18 @@ add-on's options, then ``modbus-mqtt-bridge run``.
    types a broker address; the password goes to the bridge in an environment variable,
    never into a file.
 2. Build the bridge config from ``/data/options.json``: the buses and devices of the
-   options, or a whole bridge config file named by ``config_file`` (in the add-on's
-   folder, /config, or under /share), whose MQTT connection is replaced by the
-   Supervisor's. Mapping files named by a path are looked up in that folder.
+   options, or a whole bridge config file named by ``config_file`` (relative to the
+   add-on's folder, /config, or a full path under /config or /share; a path that leads
+   elsewhere, through ``..`` or a symbolic link, is refused), whose MQTT connection is
+   replaced by the Supervisor's. Mapping files named by a path are looked up in that
+   file's folder.
 3. Validate it with the bridge's own config model (the rows name the field: ``devices.
    pump.unit: ...``), write it to /tmp, and replace this process with the bridge.
 
 Exit codes: 2 the options or the config file are invalid, 1 the Supervisor has no broker
 to give or an answer the add-on cannot use (the add-on log says what, in one line).
-``ADDON_OPTIONS``, ``ADDON_CONFIG_DIR``, ``ADDON_GENERATED`` and ``SUPERVISOR_API`` move
-the paths and the API (tests do).
+``ADDON_OPTIONS``, ``ADDON_CONFIG_DIR``, ``ADDON_SHARE_DIR``, ``ADDON_GENERATED`` and
+``SUPERVISOR_API`` move the paths and the API (tests do).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from bridge.errors import InputError
 
 OPTIONS = Path(os.environ.get("ADDON_OPTIONS", "/data/options.json"))
 CONFIG_DIR = Path(os.environ.get("ADDON_CONFIG_DIR", "/config"))
+SHARE_DIR = Path(os.environ.get("ADDON_SHARE_DIR", "/share"))
 # The web page behind Home Assistant's ingress: the Supervisor's proxy is the only client
 # let in (it logged the user in); anybody else who reaches the port gets 403.
 INGRESS_WEB = {"enabled": True, "host": "0.0.0.0", "port": 8099, "ingress_proxies": ["172.30.32.2"]}  # noqa: S104
@@ -155,7 +158,7 @@ def from_options(options: dict[str, Any]) -> tuple[dict[str, Any], Path]:
                 "give buses and devices in the options or in config_file, not both "
                 "(empty the options' buses and devices to use the file)"
             )
-        path = CONFIG_DIR / options["config_file"]
+        path = config_file(str(options["config_file"]))
         try:
             data = yaml.safe_load(path.read_text(encoding="utf-8"))
         except (OSError, yaml.YAMLError) as failed:
@@ -172,6 +175,21 @@ def from_options(options: dict[str, Any]) -> tuple[dict[str, Any], Path]:
     devices = [_device(device) for device in options["devices"]]
     mqtt = {k: options[k] for k in ("base_topic", "discovery_prefix") if options.get(k)}
     return {"mqtt": mqtt, "buses": buses, "devices": devices}, CONFIG_DIR
+
+
+def config_file(name: str) -> Path:
+    """Where ``config_file`` leads, links followed: under the add-on's folder (a relative
+    name starts there) or under /share, else AddonError."""
+    try:
+        path = (CONFIG_DIR / name).resolve()
+    except (OSError, RuntimeError, ValueError) as failed:  # a link loop, a NUL
+        raise AddonError(f"config_file {name!r}: {failed}") from None
+    if not any(path.is_relative_to(root.resolve()) for root in (CONFIG_DIR, SHARE_DIR)):
+        raise AddonError(
+            f"config_file {name!r}: not in the add-on's folder ({CONFIG_DIR}) or under "
+            f"{SHARE_DIR} (leads to {path})"
+        )
+    return path
 
 
 def _bus(bus: dict[str, Any]) -> dict[str, Any]:
