@@ -15,13 +15,16 @@ import json
 import logging
 import os
 import signal
-from collections.abc import Coroutine
+import threading
+from collections.abc import Callable, Coroutine
+from concurrent.futures import Future, ThreadPoolExecutor
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 LOG_FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 LEVELS = ("debug", "info", "warning", "error")
 FORMATS = ("text", "json")
+T = TypeVar("T")
 _STANDARD = frozenset(vars(logging.makeLogRecord({}))) | {"message", "asctime"}
 
 
@@ -65,12 +68,51 @@ def configure_logging(level: str, log_format: str = "text") -> None:
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
+class _DaemonThreads(ThreadPoolExecutor):
+    """The event loop's default executor, one daemon thread per job: a stop never waits for
+    a job that blocks (paho's connect to a broker that drops the SYN waits 5 s), while a
+    pool's threads are joined at exit and ``asyncio.run`` waits for them."""
+
+    def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
+        future: Future[T] = Future()
+
+        def run() -> None:
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(fn(*args, **kwargs))
+                except BaseException as exc:  # handed to whoever awaits the job
+                    future.set_exception(exc)
+
+        threading.Thread(target=run, name="blocking job", daemon=True).start()
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Nothing to wait for: daemon threads end with the process."""
+
+
 async def until_stopped(work: Coroutine[Any, Any, None]) -> None:
-    """Run ``work`` until it ends or SIGINT/SIGTERM arrives (Ctrl-C, ``docker stop``)."""
+    """Run ``work`` until it ends or SIGINT/SIGTERM arrives (Ctrl-C, ``docker stop``).
+
+    The first signal cancels ``work``, which ends within seconds (a write in flight is
+    finished, the farewell is bounded); a second one ends the process at once, logged."""
     task = asyncio.ensure_future(work)
     loop = asyncio.get_running_loop()
+    loop.set_default_executor(_DaemonThreads())
+    signals: list[int] = []
+
+    def stop(signum: int) -> None:
+        signals.append(signum)
+        if len(signals) == 1:
+            task.cancel()
+            return
+        logging.getLogger(__name__).error(
+            "a second stop signal: exiting now, without finishing the stop"
+        )
+        logging.shutdown()
+        os._exit(128 + signum)
+
     for signum in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(signum, task.cancel)
+        loop.add_signal_handler(signum, stop, signum)
     try:
         with contextlib.suppress(asyncio.CancelledError):
             await task

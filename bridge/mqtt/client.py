@@ -71,7 +71,7 @@ OFFLINE = b"offline"
 _UNSUPPORTED_PROTOCOL_VERSION = 0x84  # CONNACK reason code (3.1.1 return code 1 maps to it)
 _TIMEOUT = 10.0  # seconds for CONNACK, PUBACK, SUBACK, UNSUBACK
 _CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
-FAREWELL_TIMEOUT = 5.0  # seconds for the farewell messages and the goodbye, at most
+FAREWELL_TIMEOUT = 2.0  # seconds for the farewell messages and the goodbye: a stop ends in 3 s
 _FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
 
@@ -156,6 +156,25 @@ class _Connection(aiomqtt.Client):
                     return
         self._queue.put_nowait(received)  # unbounded: never QueueFull
 
+    def _on_socket_register_write(self, client: paho.Client, _userdata: Any, sock: Any) -> None:
+        """aiomqtt's, except that a socket closed before the loop's next turn is skipped:
+        aiomqtt's deferred ``add_writer`` on a closed descriptor made asyncio log a
+        traceback whenever a connection broke while the bridge was sending."""
+        fileno = sock.fileno()
+
+        def write() -> None:
+            try:
+                client.loop_write()
+            except OSError as exc:  # the connection broke: the session ends
+                if not self._disconnected.done():
+                    self._disconnected.set_exception(exc)
+
+        def register() -> None:
+            if sock.fileno() == fileno:  # else closed meanwhile: nothing to write to
+                self._loop.add_writer(fileno, write)
+
+        self._loop.call_soon_threadsafe(register)
+
     def abort(self) -> None:
         """Close a connection that never completed; paho's close also stops aiomqtt's tasks."""
         self._client._sock_close()
@@ -169,7 +188,9 @@ class _Connection(aiomqtt.Client):
         """When the connection ends, wake whatever waits for an acknowledgement at once:
         aiomqtt would leave it waiting for its whole timeout (10 s) after a broker died."""
 
-        def wake(_: asyncio.Future[None]) -> None:
+        def wake(lost: asyncio.Future[None]) -> None:
+            if not lost.cancelled():
+                lost.exception()  # seen: asyncio would log it as never retrieved
             for event in (*self._pending_publishes.values(), *self._pending_unsubscribes.values()):
                 event.set()
             for future in self._pending_subscribes.values():
@@ -586,6 +607,10 @@ async def run_with_reconnect(
                 raise failure from None
             reason = str(failure)
             refused = isinstance(failure, MqttConnectError) and failure.refused
+        # a stop that arrived while the session came down may have been swallowed on the
+        # way (Python 3.11's TaskGroup gives a child's error priority over the cancel): the
+        # task still says it is being cancelled, so it stops instead of reconnecting
+        _restore_lost_cancel()
         if connected and on_state is not None:
             on_state("offline")
         delay = backoff.failed(time.monotonic(), refused=refused)

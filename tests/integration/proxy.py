@@ -1,0 +1,86 @@
+"""A relay between an MQTT client and a real broker that misbehaves on request: answers
+late or never, or every connection cut at a chosen moment."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+
+from tests.integration.mosquitto import Broker
+
+
+class Relay:
+    """Client <-> relay <-> broker. ``delay``: the broker's answers reach the client that
+    many seconds late; ``hold``: they never do (a broker that stops acknowledging);
+    ``hold_after``: the same after that many answers (2: the CONNACK and the PUBACK of the
+    will topic's ``online``, so the session waits for its first SUBACK);
+    ``cut()``: every connection closed at once (no await: the caller picks the moment) and
+    new ones closed as soon as accepted, until ``mend()``."""
+
+    def __init__(self, broker: Broker) -> None:
+        self.broker = broker
+        self.delay = 0.0
+        self.hold = False
+        self.hold_after: int | None = None
+        self.url = ""
+        self._open = True
+        self._writers: set[asyncio.StreamWriter] = set()
+
+    def cut(self) -> None:
+        self._open = False
+        for writer in list(self._writers):
+            writer.transport.abort()
+
+    def mend(self) -> None:
+        self._open, self.hold, self.hold_after = True, False, None
+
+    async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        if not self._open:
+            writer.transport.abort()
+            return
+        up_reader, up_writer = await asyncio.open_connection(self.broker.host, self.broker.port)
+        self._writers |= {writer, up_writer}
+        down = asyncio.ensure_future(self._down(up_reader, writer))
+        try:
+            while chunk := await reader.read(65536):  # the client's packets: at once
+                up_writer.write(chunk)
+                await up_writer.drain()
+        except ConnectionError:
+            pass
+        finally:
+            self._writers -= {writer, up_writer}
+            up_writer.close()  # no DISCONNECT passed: the broker sends the will
+            writer.close()
+            await asyncio.gather(down, return_exceptions=True)
+
+    async def _down(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        loop = asyncio.get_running_loop()
+
+        def write(chunk: bytes) -> None:
+            if not writer.is_closing():
+                writer.write(chunk)
+
+        passed = 0
+        while chunk := await reader.read(65536):
+            if self.hold:
+                continue
+            if self.delay:
+                loop.call_later(self.delay, write, chunk)
+            else:
+                write(chunk)
+            passed += 1
+            self.hold |= passed == self.hold_after
+        writer.close()
+
+
+@contextlib.asynccontextmanager
+async def relayed(broker: Broker) -> AsyncIterator[tuple[Relay, str]]:
+    relay = Relay(broker)
+    server = await asyncio.start_server(relay.serve, "127.0.0.1", 0)
+    relay.url = f"mqtt://127.0.0.1:{server.sockets[0].getsockname()[1]}"
+    try:
+        yield relay, relay.url
+    finally:
+        relay.cut()
+        server.close()
