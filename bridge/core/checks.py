@@ -1,4 +1,5 @@
-"""Whole-mapping checks: keys, addresses, references, options, function codes, overlaps.
+"""Whole-mapping checks: keys, addresses, references, options, function codes, overlaps, and
+the presentation conventions (``convention``: names, manufacturer, enabled defaults).
 
 Each check returns rows ``entities.<key>.<field>: message``; ``check_mapping`` runs them all
 so a user sees every problem of a file at once.
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING
 from pydantic import ValidationError
 
 from bridge.core.address import to_wire
+from bridge.core.convention import convention_problems
 from bridge.core.entity import Access, DataType, Entity, Table
 from bridge.core.hass import presentation_problems
 from bridge.core.protocol import Protocol
@@ -67,6 +69,8 @@ def check_mapping(mapping: Mapping) -> list[str]:
         rows.extend(_overlaps(mapping))
     if mapping.status is not None and mapping.status not in mapping.entities:
         rows.append(f"status: no entity {mapping.status!r}")
+    if not basis:  # names are compared per option combination: options must be valid
+        rows.extend(convention_problems(mapping, _variants(mapping)))
     return rows
 
 

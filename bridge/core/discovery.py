@@ -126,6 +126,7 @@ def build_device_discovery(
         units=units,
         limits=limits,
         readings=readings,
+        device_name=device.name,
     )
     return {
         "device": {

@@ -65,6 +65,7 @@ class ComponentContext:
     units: AnyMapping[str, str | None]
     limits: AnyMapping[str, Limits]
     readings: AnyMapping[str, Value] = field(default_factory=dict)
+    device_name: str = ""
 
     @property
     def unique_prefix(self) -> str:
@@ -80,6 +81,17 @@ class ComponentContext:
 def slug(text: str) -> str:
     """An entity-id-safe form: lowercase letters, digits and ``_``."""
     return _SLUG.sub("_", text.lower()).strip("_")
+
+
+def shown_name(name: str, device_name: str) -> str:
+    """The entity's name without a leading device name: Home Assistant shows the device's
+    name before it ("Genset status" on the device "Genset" would read "Genset Genset
+    status")."""
+    prefix = f"{device_name} "
+    if device_name and name.casefold().startswith(prefix.casefold()) and len(name) > len(prefix):
+        rest = name[len(prefix) :]
+        return rest[:1].upper() + rest[1:]
+    return name
 
 
 def value_template(key: str) -> str:
@@ -113,7 +125,7 @@ def base_config(key: str, name: str, platform: Component, context: ComponentCont
         "platform": platform.value,
         "unique_id": f"{context.unique_prefix}_{key}",
         "default_entity_id": f"{platform.value}.{slug(context.device_id)}_{key}",
-        "name": name,
+        "name": shown_name(name, context.device_name),
         "qos": QOS,
     }
 

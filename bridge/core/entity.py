@@ -103,6 +103,12 @@ class Presentation(BaseModel):
     entity_category: str | None = Field(None, pattern="^(" + "|".join(_CATEGORIES) + ")$")
     icon: str | None = Field(None, pattern=r"^mdi:[a-z0-9-]+$")
     enabled: bool | None = Field(None, description="enabled by default in Home Assistant")
+    enabled_reason: str | None = Field(
+        None,
+        min_length=1,
+        description="why a diagnostic entity (or a dangerous setting) is enabled by default: "
+        "the first thing to look at when something is wrong",
+    )
     display_precision: int | None = Field(None, ge=0, le=6)
     mode: str | None = Field(None, pattern="^(auto|box|slider)$", description="number mode")
 
@@ -303,10 +309,19 @@ class Entity(BaseModel):
         return PollClass.SLOW if self.writable else PollClass.FAST
 
     @cached_property
+    def shown_as_diagnostic(self) -> bool:
+        """Diagnostic, or a dangerous setting: Home Assistant shows it read-only, as a
+        diagnostic sensor, until the device allows dangerous writes (changed when the
+        device is commissioned, not in daily use)."""
+        category = self.ha.entity_category
+        return category == "diagnostic" or (category == "config" and self.dangerous)
+
+    @cached_property
     def enabled_by_default(self) -> bool:
+        """``ha.enabled``, else: enabled unless low confidence or shown as diagnostic."""
         if self.ha.enabled is not None:
             return self.ha.enabled
-        return self.confidence is not Confidence.LOW and self.ha.entity_category != "diagnostic"
+        return self.confidence is not Confidence.LOW and not self.shown_as_diagnostic
 
     @cached_property
     def decimals(self) -> int:
@@ -335,6 +350,7 @@ _DERIVED = (
     "kind",
     "component",
     "poll_class",
+    "shown_as_diagnostic",
     "enabled_by_default",
     "decimals",
 )
@@ -447,6 +463,8 @@ def _check_dangerous_below(e: Entity) -> str | None:
 def _check_presentation(e: Entity) -> str | None:
     if e.confidence is Confidence.LOW and e.ha.enabled:
         return "a low-confidence entity stays disabled by default (ha.enabled: false)"
+    if e.ha.enabled_reason is not None and e.ha.enabled is not True:
+        return "enabled_reason explains an explicit ha.enabled: true"
     if e.alarm and e.kind not in ("bool", "enum"):
         return "alarm entities are booleans or enums"
     if e.ha.entity_category == "config" and not e.writable:

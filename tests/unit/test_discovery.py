@@ -438,7 +438,7 @@ def test_dangerous_writable_entity_is_read_only_unless_allowed() -> None:
     assert _one(entity) == _ids("sensor") | {
         "name": "Value",
         "entity_category": "diagnostic",  # Home Assistant refuses config on sensors
-        "enabled_by_default": True,
+        "enabled_by_default": False,  # a commissioning setting
     } | _state() | {
         "device_class": "frequency",
         "unit_of_measurement": "Hz",
@@ -448,6 +448,7 @@ def test_dangerous_writable_entity_is_read_only_unless_allowed() -> None:
     allowed = _one(entity, allow_dangerous_writes=True)
     assert allowed is not None
     assert (allowed["platform"], allowed["unique_id"]) == ("number", "modbus_dev_value")
+    assert (allowed["entity_category"], allowed["enabled_by_default"]) == ("config", False)
 
 
 def test_dangerous_switch_shown_read_only_drops_the_switch_device_class() -> None:
@@ -701,6 +702,25 @@ def test_bridge_health_sensors_in_entity_mode() -> None:
         payload = json.loads(message.payload)
         assert "platform" not in payload
         assert payload["device"]["identifiers"] == ["modbus_bridge"]
+
+
+@pytest.mark.parametrize(
+    ("device_name", "name", "shown"),
+    [
+        ("Genset", "Genset status", "Status"),
+        ("Genset", "genset status", "Status"),
+        ("Borehole pump", "Borehole pump run time", "Run time"),
+        ("Genset", "Genset", "Genset"),  # nothing left: kept
+        ("Gen", "Genset status", "Genset status"),  # a word, not a prefix of one
+        ("Pump", "Main pump speed", "Main pump speed"),
+    ],
+)
+def test_an_entity_name_does_not_repeat_the_device_name(
+    device_name: str, name: str, shown: str
+) -> None:
+    config = _one({"name": name}, name=device_name)
+    assert config is not None
+    assert config["name"] == shown
 
 
 def test_every_device_points_to_the_bridge() -> None:

@@ -227,7 +227,7 @@ def test_kinds_and_derived_components() -> None:
     assert mapping.entities["setpoint"].poll_class is PollClass.SLOW
 
 
-def test_low_confidence_and_diagnostic_are_disabled_by_default() -> None:
+def test_low_confidence_diagnostic_and_dangerous_settings_are_disabled_by_default() -> None:
     mapping = make_mapping(
         {
             "a": {"name": "A", "address": 1},
@@ -236,11 +236,20 @@ def test_low_confidence_and_diagnostic_are_disabled_by_default() -> None:
             "d": {
                 "name": "D",
                 "address": 4,
-                "ha": {"entity_category": "diagnostic", "enabled": True},
+                "ha": {"entity_category": "diagnostic", "enabled": True, "enabled_reason": "r"},
             },
+            "e": {
+                "name": "E",
+                "address": 5,
+                "access": "rw",
+                "dangerous": True,
+                "ha": {"entity_category": "config"},
+            },
+            "f": {"name": "F", "address": 6, "access": "rw", "ha": {"entity_category": "config"}},
         }
     )
-    assert [e.enabled_by_default for e in mapping.entities.values()] == [True, False, False, True]
+    enabled = [e.enabled_by_default for e in mapping.entities.values()]
+    assert enabled == [True, False, False, True, False, True]
 
 
 def test_decimals_follow_scale_and_offset() -> None:
