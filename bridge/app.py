@@ -16,7 +16,10 @@ publishing without it. Each session publishes ``<base>/bridge/health`` every
 whole run, and the optional web page (bridge/web) shows the same values, health and
 refusals, fed by ``feed``. A clean stop (Ctrl-C, SIGTERM) sets every device's availability
 ``offline`` before ``bridge/state`` goes ``offline``; the demo (``remove_on_stop``) empties
-every retained message it published.
+every retained message it published. One bridge per base topic: before a connection says
+``online``, ``_alone`` checks that no other live bridge serves the topic (else this one
+stands by without polling: bridge/core/instance.py), and a bridge that comes up beside
+this one later is told apart by the ``bridge/info`` it publishes.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from bridge.core.discovery import (
     Publish,
 )
 from bridge.core.health_report import HealthReporter, Snapshot
+from bridge.core.instance import Instance, answering_instance, instance_of, taken_message
 from bridge.core.management_request import response
 from bridge.core.state import compact, plain_payload, published, state_document
 from bridge.core.topics import Topics
@@ -49,6 +53,7 @@ from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller, DeviceUpdate
 from bridge.mqtt import (
+    BaseTopicTakenError,
     Message,
     MqttClient,
     MqttError,
@@ -56,15 +61,19 @@ from bridge.mqtt import (
     MqttRefusedError,
     run_with_reconnect,
 )
+from bridge.mqtt.client import STANDBY_RETRY
 from bridge.web import WebFeed, serve_web
 
 log = logging.getLogger(__name__)
+ONLINE = b"online"
 Outgoing = tuple[str, str, bool]  # topic, payload, retain
 OUTBOX = 200  # non-retained messages kept while the broker is away
 HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
 HA_REPUBLISH_GAP = 30.0  # seconds at least between two republishes Home Assistant asks for
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
 STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
+CHECK_SETTLE = 0.3  # seconds to wait for a retained bridge/state or bridge/info at connect
+PING_TIMEOUT = 2.0  # seconds for the bridge that bridge/state names to answer a health check
 
 
 class Bridge:
@@ -98,9 +107,19 @@ class Bridge:
         self._requests = 0  # management requests running
         self._group: asyncio.TaskGroup | None = None
         self._health = HealthReporter()  # rates since the previous report
-        self.mqtt_state = "connecting"  # "online" while connected, "offline" between
+        # "online" while connected, "offline" between, "standby" while another bridge
+        # serves the base topic
+        self.mqtt_state = "connecting"
+        self.instance = Instance.new(time.time())
+        self._rival: Instance | None = None  # a bridge that came up beside this one
+        self._info_due = False  # bridge/info again: another bridge overwrote it
+        self._engine: asyncio.Task[None] | None = None
         self.management = Management(
-            loaded, self.engine, on_reload=self._reloaded, mqtt_state=lambda: self.mqtt_state
+            loaded,
+            self.engine,
+            on_reload=self._reloaded,
+            mqtt_state=lambda: self.mqtt_state,
+            instance=self.instance,
         )
         self._republish = False  # after a mapping reload: info, discovery and state
         # requests beyond the management API, by command (the demo's "demo/fault")
@@ -115,7 +134,7 @@ class Bridge:
         web = serve_web(self.loaded.config.bridge.web, self)
         async with metrics, web, asyncio.TaskGroup() as group:
             self._group = group
-            group.create_task(self.engine.run(), name="engine")
+            self._engine = group.create_task(self.engine.run(), name="engine")
             group.create_task(
                 run_with_reconnect(
                     self.mqtt,
@@ -123,12 +142,63 @@ class Bridge:
                     self._session,
                     on_state=self._mqtt_is,
                     first_connect_required=self.must_connect,
+                    before_online=self._alone,
                 ),
                 name="mqtt",
             )
 
     def _mqtt_is(self, state: str) -> None:
+        """Follow the MQTT side; a bridge that stands by does not poll (a device that takes
+        one TCP client, or one master on its line, is the other bridge's)."""
         self.mqtt_state = state
+        if state == "standby" and self._engine is not None:
+            self._engine.cancel()  # a write in flight is finished first
+            self._engine = None
+        elif state == "online" and self._engine is None and self._group is not None:
+            self._engine = self._group.create_task(self.engine.run(), name="engine")
+
+    async def _alone(self, client: MqttClient) -> None:
+        """Before this connection says ``online``: subscribe to the commands (one that
+        comes meanwhile waits for the session), then BaseTopicTakenError if another
+        bridge serves the base topic (bridge/core/instance.py): the connection closes
+        and what came is dropped, never run."""
+        topics = self.topics
+        commands = (*topics.command_filters(), topics.bridge_requests)
+        try:
+            await client.subscribe(*commands, qos=max(1, self.mqtt.qos), live_only=True)
+        except MqttRefusedError as exc:  # an ACL: publishing state still works
+            log.error("%s: commands will not work (filters: %s)", exc, ", ".join(commands))
+        found = await client.retained(topics.bridge_state, settle=CHECK_SETTLE, limit=1)
+        if found.get(topics.bridge_state) != ONLINE:
+            return
+        found = await client.retained(topics.bridge_info, settle=CHECK_SETTLE, limit=1)
+        other = instance_of(found.get(topics.bridge_info))
+        if other is not None and other.id == self.instance.id:
+            return  # this run's own, from before a reconnect
+        answered, named = await self._answer_of_the_other(client)
+        if answered:
+            taken = taken_message(self.mqtt.base_topic, named or other, STANDBY_RETRY)
+            raise BaseTopicTakenError(taken)
+        log.info(
+            "%s says online, but no bridge answers a health check there: taking it over",
+            topics.bridge_state,
+        )
+
+    async def _answer_of_the_other(self, client: MqttClient) -> tuple[bool, Instance | None]:
+        """Whether a bridge answers a health check on this base topic within PING_TIMEOUT
+        (this one does not listen for requests yet), and the instance it names."""
+        answers = self.topics.bridge_response("health_check")
+        transaction = f"instance-check-{self.instance.id}"
+        async with client.watching(answers) as following:
+            request = json.dumps({"transaction": transaction})
+            await client.publish(self.topics.bridge_request("health_check"), request)
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(PING_TIMEOUT):
+                    while True:
+                        answer = (await following()).payload
+                        if transaction.encode() in answer:
+                            return True, answering_instance(answer)
+        return False, None
 
     async def _session(self, client: MqttClient) -> None:
         """One connection: subscribe, clean up, publish everything, then serve."""
@@ -136,18 +206,18 @@ class Bridge:
         client.farewell = functools.partial(self._farewell, client)
         if self.remove_on_stop:
             client.goodbye = b""
-        commands = (*topics.command_filters(), topics.bridge_requests)
-        qos = max(1, self.mqtt.qos)
-        try:
-            await client.subscribe(*commands, qos=qos, live_only=True)
-        except MqttRefusedError as exc:  # an ACL: publishing state still works
-            log.error("%s: commands will not work (filters: %s)", exc, ", ".join(commands))
+        qos = max(1, self.mqtt.qos)  # the commands: subscribed before online (_alone)
         try:
             await client.subscribe(topics.ha_status, qos=qos)
         except MqttRefusedError as exc:
             log.warning(
                 "%s: Home Assistant's restarts go unnoticed (retained messages remain)", exc
             )
+        try:  # a bridge that comes up beside this one says so there
+            await client.subscribe(topics.bridge_info, qos=qos)
+        except MqttRefusedError as exc:
+            log.debug("%s: a second bridge on this base topic goes unnoticed", exc)
+        self._rival = None
         await self._publish_info(client)
         await self._publish_everything(client)  # values first: one burst, one round trip
         await self.discovery.publish(client, clear_stale=True)
@@ -159,6 +229,10 @@ class Bridge:
                 group.create_task(self._health_reports(client))
                 async for message in client.messages():
                     self._handle(message)
+                    if self._rival is not None:
+                        raise BaseTopicTakenError(
+                            taken_message(self.mqtt.base_topic, self._rival, STANDBY_RETRY)
+                        )
         except ExceptionGroup as failed:  # the MQTT error, so the reconnect loop sees it
             raise first_of(failed, MqttError) or failed from None
 
@@ -229,6 +303,9 @@ class Bridge:
         self.feed.changed(update.device_id, update.changed)
 
     async def _flush(self, client: MqttClient) -> None:
+        if self._info_due:
+            self._info_due = False
+            await self._publish_info(client)
         if self._republish:  # after a mapping reload: new entities, new discovery
             self._republish = False
             self._ha_online.clear()
@@ -323,9 +400,30 @@ class Bridge:
             if message.payload.strip() == b"online":
                 self._ha_online.set()
             return
+        if message.topic == self.topics.bridge_info:
+            self._another_info(message)
+            return
         target = self.topics.parse_command(message.topic)
         if target is not None:
             self.dispatcher.handle(target, message)
+
+    def _another_info(self, message: Message) -> None:
+        """A live ``bridge/info`` of another instance: a bridge came up beside this one.
+        The one that started later stands by; this one, if it stays, says it is the one
+        serving the topic (the retained record named the other)."""
+        other = instance_of(message.payload)
+        if message.retain or other is None or other.id == self.instance.id:
+            return  # the record from before this session, an older bridge, or this one
+        if self.instance.yields_to(other):
+            self._rival = other
+        else:
+            log.error(
+                "another bridge came up on base topic %r (%s); this one keeps serving it",
+                self.mqtt.base_topic,
+                other.describe(),
+            )
+            self._info_due = True
+            self._wake.set()
 
     def _spawn(self, work: Any, failed: Callable[[str], None] | None = None) -> None:
         """Run a command's or request's work in the bridge's TaskGroup; whatever it raises

@@ -40,6 +40,7 @@ from bridge.config import (
     load_device_mapping,
 )
 from bridge.core.guard import Guard
+from bridge.core.instance import Instance
 from bridge.core.management_request import (
     MAX_UNIT,
     REQUESTS,
@@ -89,12 +90,14 @@ class Management:
         *,
         on_reload: Reloaded,
         mqtt_state: Callable[[], str],
+        instance: Instance | None = None,
     ) -> None:
         self.loaded = loaded
         self.engine = engine
         self.settings = loaded.config.bridge
         self._on_reload = on_reload
         self._mqtt_state = mqtt_state
+        self.instance = instance  # this run, named in info and health checks
         self._reloading = asyncio.Lock()
         self._scanning: set[str] = set()  # buses with a scan running
         self._raw: Counter[str] = Counter()  # raw requests waiting or running, per bus
@@ -340,6 +343,7 @@ class Management:
             "devices_online": online,
             "devices_offline": offline,
             "uptime_s": round(snapshot.uptime, 1),
+            **self._instance(),
         }
 
     def info(self) -> dict[str, Any]:
@@ -361,8 +365,12 @@ class Management:
             "mappings": {"shipped": builtin_mapping_names(), "in_use": in_use},
             "requests": sorted(REQUESTS),
             "raw_writes": self.settings.allow_raw_writes,
+            **self._instance(),
             **_schemas(),
         }
+
+    def _instance(self) -> dict[str, Any]:
+        return {"instance": self.instance.document()} if self.instance is not None else {}
 
 
 @functools.cache

@@ -65,6 +65,9 @@ _HINTS = {
     errno.EACCES: "add the user to the dialout group (in a container: --group-add dialout)",
     errno.EPERM: "add the user to the dialout group (in a container: --group-add dialout)",
     errno.EBUSY: "another program holds the port; stop it (ModemManager, a second bridge)",
+    # pyserial's exclusive lock (flock), which pymodbus asks for: one process per adapter
+    errno.EAGAIN: "another program holds the port; stop it (a second bridge, mbpoll, a "
+    "vendor tool): one master per RS485 line",
     errno.EINVAL: "the port refuses these line settings: check the adapter supports the "
     "bus's baudrate, parity, stop bits and byte size",
 }

@@ -2,6 +2,7 @@
 
 from bridge.mqtt.client import Message, MqttClient, run_with_reconnect
 from bridge.mqtt.errors import (
+    BaseTopicTakenError,
     MqttConnectError,
     MqttDisconnectedError,
     MqttError,
@@ -11,6 +12,7 @@ from bridge.mqtt.errors import (
 )
 
 __all__ = [
+    "BaseTopicTakenError",
     "Message",
     "MqttClient",
     "MqttConnectError",

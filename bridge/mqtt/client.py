@@ -59,6 +59,7 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 from bridge.config import MqttConfig, TlsConfig
 from bridge.core.backoff import ReconnectBackoff
 from bridge.mqtt.errors import (
+    BaseTopicTakenError,
     MqttConnectError,
     MqttDisconnectedError,
     MqttPublishError,
@@ -74,6 +75,7 @@ _CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
 FAREWELL_TIMEOUT = 2.0  # seconds for the farewell messages and the goodbye: a stop ends in 3 s
 _FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
+STANDBY_RETRY = 10.0  # seconds between two looks at a base topic another bridge serves
 
 _log = logging.getLogger(__name__)
 
@@ -116,6 +118,7 @@ class _Connection(aiomqtt.Client):
     def __init__(self, hostname: str, port: int, **options: Any) -> None:
         super().__init__(hostname, port, **options)
         self.collectors: dict[str, asyncio.Queue[_Received]] = {}
+        self.watchers: dict[str, asyncio.Queue[_Received]] = {}  # by exact topic, live too
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
         self.reached = False  # the socket (and TLS) connected and CONNECT was sent
 
@@ -149,6 +152,10 @@ class _Connection(aiomqtt.Client):
 
     def _on_message(self, _client: paho.Client, _userdata: Any, message: paho.MQTTMessage) -> None:
         received = _Received(message)
+        watcher = self.watchers.get(received.topic.value)
+        if watcher is not None:
+            watcher.put_nowait(received)
+            return
         if received.retain:
             for topic_filter, queue in self.collectors.items():
                 if received.topic.matches(topic_filter):
@@ -210,8 +217,10 @@ class MqttClient:
         will_topic: str,
         client_id: str | None = None,
         version: str | None = None,
+        before_online: Callable[[MqttClient], Awaitable[None]] | None = None,
     ) -> None:
         self._config = config
+        self._before_online = before_online  # may raise BaseTopicTakenError
         self._version = version or config.version  # a known 3.1.1 broker: no MQTT 5 try
         self._will_topic = will_topic
         self._client_id = client_id if client_id is not None else config.client_id
@@ -249,6 +258,12 @@ class MqttClient:
         else:
             connection = await self._open(aiomqtt.ProtocolVersion.V311, context)
         self._connection = connection
+        if self._before_online is not None:
+            try:
+                await self._before_online(self)
+            except BaseException:
+                await self._leave_quietly(connection)
+                raise
         try:
             await self.publish(self._will_topic, ONLINE, retain=True)
         except MqttDisconnectedError as exc:
@@ -318,6 +333,9 @@ class MqttClient:
         self._filters.clear()
         if connection is None:
             return
+        if exc_type is not None and issubclass(exc_type, BaseTopicTakenError):
+            await self._leave_quietly(connection)  # the topic is another bridge's to keep
+            return
         stopping = exc_type is None or issubclass(exc_type, asyncio.CancelledError)
         try:
             if stopping:
@@ -332,6 +350,18 @@ class MqttClient:
             _log.debug("no clean MQTT disconnect: %s", error)
         finally:
             connection.abort()  # no-op after a clean DISCONNECT; else the will goes out
+
+    async def _leave_quietly(self, connection: _Connection) -> None:
+        """Disconnect without a word: a clean DISCONNECT, so the broker drops the will too
+        (another bridge's ``online`` stays)."""
+        self._connection, self._protocol = None, None
+        try:
+            async with asyncio.timeout(_CLOSE_TIMEOUT):
+                await connection.__aexit__(None, None, None)
+        except (aiomqtt.MqttError, TimeoutError) as error:
+            _log.debug("no clean MQTT disconnect: %s", error)
+        finally:
+            connection.abort()
 
     async def _say_farewell(self, connection: _Connection, messages: list[tuple[str, str]]) -> bool:
         """The farewell messages and then the goodbye, sent at once and acknowledged
@@ -403,8 +433,9 @@ class MqttClient:
     async def subscribe(self, *filters: str, qos: int = 1, live_only: bool = False) -> None:
         """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused.
 
-        ``live_only`` (command topics): on MQTT 5 the broker sends no retained message and
-        keeps the retain flag of live ones; on 3.1.1 the caller refuses retained messages.
+        ``live_only`` (command topics): on MQTT 5 the broker sends no retained message, keeps
+        the retain flag of live ones and does not echo this client's own publishes; on
+        3.1.1 the caller refuses retained messages.
         """
         connection = self._require()
         if not filters:
@@ -414,6 +445,7 @@ class MqttClient:
         if live_only and self._protocol == "5":
             options = SubscribeOptions(
                 qos=qos,
+                noLocal=True,  # not what this client publishes (an instance check)
                 retainAsPublished=True,
                 retainHandling=SubscribeOptions.RETAIN_DO_NOT_SEND,
             )
@@ -451,11 +483,13 @@ class MqttClient:
         *,
         settle: float = 0.5,
         keep: Callable[[str], bool] | None = None,
+        limit: int | None = None,
     ) -> dict[str, bytes]:
         """The retained messages under ``topic_filter`` now (topic -> payload), only those
         whose topic ``keep`` accepts if given (the others are not held in memory).
 
-        Subscribes, collects until no retained message came for ``settle`` seconds, then
+        Subscribes, collects until no retained message came for ``settle`` seconds (or
+        ``limit`` were kept: 1 for a single topic, whose message comes at once), then
         unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
         keep flowing to ``messages()`` meanwhile.
         """
@@ -474,6 +508,8 @@ class MqttClient:
                     break
                 if keep is None or keep(received.topic.value):
                     found[received.topic.value] = received.payload
+                if limit is not None and len(found) >= limit:
+                    break
             if not kept:
                 await self._unsubscribe(connection, topic_filter)
         finally:
@@ -483,6 +519,24 @@ class MqttClient:
             if keep is None or keep(received.topic.value):
                 found[received.topic.value] = received.payload
         return found
+
+    @contextlib.asynccontextmanager
+    async def watching(self, topic: str) -> AsyncIterator[Callable[[], Awaitable[Message]]]:
+        """Every message on ``topic`` (one topic, no wildcard), retained or live, for the
+        block's ``next()`` alone: ``messages()`` does not see them, nor they its own."""
+        connection = self._require()
+        queue: asyncio.Queue[_Received] = asyncio.Queue()
+        connection.watchers[topic] = queue
+
+        async def following() -> Message:
+            return _message(await queue.get())
+
+        try:
+            await self.subscribe(topic)
+            yield following
+            await self._unsubscribe(connection, topic)
+        finally:
+            del connection.watchers[topic]
 
     async def _unsubscribe(self, connection: _Connection, topic_filter: str) -> None:
         try:
@@ -563,6 +617,7 @@ async def run_with_reconnect(
     backoff: ReconnectBackoff | None = None,
     on_state: Callable[[str], None] | None = None,
     first_connect_required: bool = False,
+    before_online: Callable[[MqttClient], Awaitable[None]] | None = None,
 ) -> None:
     """Run ``session`` on a connected client, reconnecting for as long as it takes.
 
@@ -576,16 +631,23 @@ async def run_with_reconnect(
     (broker and protocol); an outage is logged once when it starts (WARNING) and once
     when it ends. ``first_connect_required`` (the demo): a first connect that fails raises
     its MqttConnectError instead of retrying, so a wrong URL or login is said once, not
-    retried forever.
+    retried forever. ``before_online`` runs on each new connection before the will topic
+    says ``online``; when it (or the session) raises BaseTopicTakenError, the client
+    leaves without a word, ``on_state`` hears ``"standby"``, the error is logged once and
+    the loop looks again every ``STANDBY_RETRY`` seconds until the topic is free.
     """
     backoff = backoff or ReconnectBackoff()
     outage: str | None = None
     version: str | None = None  # what the broker answered last time
     ever_connected = False
+    standing_by = False
     while True:
         connected = False
+        taken: BaseException | None = None
         try:
-            async with MqttClient(config, will_topic=will_topic, version=version) as client:
+            async with MqttClient(
+                config, will_topic=will_topic, version=version, before_online=before_online
+            ) as client:
                 connected = ever_connected = True
                 version = client.protocol
                 backoff.connected(time.monotonic())
@@ -597,10 +659,15 @@ async def run_with_reconnect(
                     extra={"event": "mqtt_up", "broker": config.url, "protocol": client.protocol},
                 )
                 outage = None
+                if standing_by:
+                    _log.warning("MQTT: base topic free again: this bridge takes over")
+                    standing_by = False
                 if on_state is not None:
                     on_state("online")
                 await session(client)
             return
+        except* BaseTopicTakenError as group:
+            taken = group.exceptions[0]
         except* (MqttConnectError, MqttDisconnectedError) as group:
             failure = group.exceptions[0]
             if first_connect_required and not ever_connected:
@@ -611,6 +678,13 @@ async def run_with_reconnect(
         # way (Python 3.11's TaskGroup gives a child's error priority over the cancel): the
         # task still says it is being cancelled, so it stops instead of reconnecting
         _restore_lost_cancel()
+        if taken is not None:
+            _log.log(logging.DEBUG if standing_by else logging.ERROR, "%s", taken)
+            standing_by = True
+            if on_state is not None:
+                on_state("standby")
+            await asyncio.sleep(STANDBY_RETRY)
+            continue
         if connected and on_state is not None:
             on_state("offline")
         delay = backoff.failed(time.monotonic(), refused=refused)

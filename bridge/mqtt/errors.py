@@ -16,11 +16,14 @@
         │                           expired, broker restarted) or an operation on it timed out
         ├── MqttRefusedError        the broker answered a SUBSCRIBE with a failure code (an
         │                           ACL); the session itself is fine
+        ├── BaseTopicTakenError     another bridge serves the same base topic: this one left
+        │                           the broker without a word (no will) and stands by
         └── MqttPublishError        one message cannot be published (a topic MQTT does not
                                     allow, a payload beyond 256 MB); the session is fine
 
 ``run_with_reconnect`` retries after MqttConnectError and MqttDisconnectedError (bare or
-inside an ExceptionGroup from the session's TaskGroup); every other error propagates.
+inside an ExceptionGroup from the session's TaskGroup), and after BaseTopicTakenError
+every ``STANDBY_RETRY`` seconds; every other error propagates.
 """
 
 from __future__ import annotations
@@ -65,3 +68,7 @@ class MqttRefusedError(MqttError):
 
 class MqttPublishError(MqttError):
     """One message cannot be published (invalid topic, payload too large); nothing sent."""
+
+
+class BaseTopicTakenError(MqttError):
+    """Another bridge serves this base topic; the message says which and what to do."""
