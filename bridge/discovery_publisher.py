@@ -147,6 +147,7 @@ class DiscoveryPublisher:
             limits=limits,
             readings=readings,
             state_refresh=self._mqtt.state_refresh,
+            health=self._health_interval > 0,  # the device's health sensors read it
         )
 
     async def publish(
@@ -166,7 +167,6 @@ class DiscoveryPublisher:
                 self.origin,
                 self.topics.base,
                 buses=list(self.engine.schedulers) if health else [],
-                devices=list(self.engine.devices) if health else [],
             )
             await self._send(client, bridge_messages, current)
         for device_id, poller in self.engine.devices.items():

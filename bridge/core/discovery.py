@@ -17,10 +17,11 @@ copies a shared ``state_topic`` into every component, and a write-only number or
 state topic those run optimistic, as they must.
 
 The bridge is a device of its own: a connectivity binary_sensor on ``<base>/bridge/state``
-and, per bus and per device, diagnostic sensors whose value templates read the periodic
-``<base>/bridge/health`` document (see ``health_report``): per bus the request rate,
-utilisation (%), timeouts and frame errors; per device its state, p95 latency (ms),
-errors and requests.
+and, per bus, diagnostic sensors whose value templates read the periodic
+``<base>/bridge/health`` document (see ``health_report``): the request rate, utilisation
+(%), timeouts and frame errors. Each device carries its own: its Modbus state, p95
+latency (ms), errors and requests (unique ids and entity ids as when they were on the
+bridge device).
 
 ``units`` are units read from registers (``unit_from``) and ``limits`` the current
 limits read from registers (``min_from``/``max_from``, see ``codec.limits_of``);
@@ -114,8 +115,10 @@ def build_device_discovery(
     limits: AnyMapping[str, Limits] = _NO_LIMITS,
     readings: AnyMapping[str, Value] = _NO_READINGS,
     state_refresh: float = 300.0,
+    health: bool = False,
 ) -> dict[str, Any]:
-    """The device-based discovery payload for ``<prefix>/device/<device>/config``."""
+    """The device-based discovery payload for ``<prefix>/device/<device>/config``; with
+    ``health``, the device's own sensors of ``<base>/bridge/health`` too."""
     context = ComponentContext(
         topics=topics,
         device_id=device.id,
@@ -142,7 +145,8 @@ def build_device_discovery(
             {"topic": topics.availability(device.id)},
         ],
         "availability_mode": "all",
-        "cmps": device_components(device.mapping, device.options, context),
+        "cmps": device_components(device.mapping, device.options, context)
+        | (device_health_components(topics, device.id) if health else {}),
     }
 
 
@@ -172,6 +176,7 @@ def build_discovery(
     limits: AnyMapping[str, Limits] = _NO_LIMITS,
     readings: AnyMapping[str, Value] = _NO_READINGS,
     state_refresh: float = 300.0,
+    health: bool = False,
 ) -> list[Publish]:
     """The retained discovery messages of one device: one (device mode) or one per
     component (entity mode)."""
@@ -183,6 +188,7 @@ def build_discovery(
         limits=limits,
         readings=readings,
         state_refresh=state_refresh,
+        health=health,
     )
     if mode == "device":
         return [Publish(topics.device_config(device.id), dump(payload))]
@@ -196,13 +202,12 @@ def build_bridge_discovery(
     *,
     mode: Mode = "device",
     buses: Sequence[str] = (),
-    devices: Sequence[str] = (),
 ) -> list[Publish]:
     """The bridge as a device of its own, with a connectivity binary_sensor on
     ``<base>/bridge/state`` (no availability: offline shows as disconnected), and
-    diagnostic sensors reading ``<base>/bridge/health`` for each of ``buses`` and
-    ``devices`` (ids; pass none when health reports are off), available while the
-    bridge is online.
+    diagnostic sensors reading ``<base>/bridge/health`` for each of ``buses`` (ids; pass
+    none when health reports are off), available while the bridge is online. Each
+    device's health sensors are on the device (``build_device_discovery(health=True)``).
 
     ``bridge_id`` names the bridge in the discovery topic
     (``<prefix>/device/<bridge_id>/config``) and in its entity ids.
@@ -215,7 +220,7 @@ def build_bridge_discovery(
         "name": "Connection state",
         "qos": QOS,
         "entity_category": "diagnostic",
-        "enabled_by_default": True,
+        "enabled_by_default": True,  # whether the bridge runs: the first thing to look at
         "device_class": "connectivity",
         "state_topic": topics.bridge_state,
         "payload_on": "online",
@@ -230,8 +235,7 @@ def build_bridge_discovery(
             "sw_version": origin.sw_version,
         },
         "origin": origin.as_dict(),
-        "cmps": {"connection_state": connection}
-        | health_components(topics, bridge_id, buses=buses, devices=devices),
+        "cmps": {"connection_state": connection} | bus_health_components(topics, bridge_id, buses),
     }
     if mode == "device":
         return [Publish(topics.device_config(bridge_id), dump(payload))]
@@ -239,14 +243,16 @@ def build_bridge_discovery(
 
 
 @dataclass(frozen=True, slots=True)
-class _HealthSensor:
-    """One diagnostic sensor per bus or per device, reading a field of bridge/health."""
+class HealthSensor:
+    """One diagnostic sensor per bus or per device, reading a field of bridge/health;
+    enabled by default when it is the first thing to look at (``enabled_reason``)."""
 
     suffix: str
     name: str
     field: str
     options: AnyMapping[str, Any]
     percent: bool = False  # a 0..1 fraction shown as %
+    enabled_reason: str | None = None
 
     def template(self, source: str) -> str:
         value = f"value_json.{source}.{self.field}"
@@ -254,8 +260,8 @@ class _HealthSensor:
 
 
 _COUNTER = MappingProxyType({"state_class": "total_increasing"})
-_BUS_SENSORS = (
-    _HealthSensor(
+BUS_HEALTH_SENSORS = (
+    HealthSensor(
         "request_rate",
         "request rate",
         "requests_per_s",
@@ -265,69 +271,102 @@ _BUS_SENSORS = (
             "icon": "mdi:swap-horizontal",
         },
     ),
-    _HealthSensor(
+    HealthSensor(
         "utilisation",
         "utilisation",
         "utilisation",
         {"unit_of_measurement": "%", "state_class": "measurement", "icon": "mdi:gauge"},
         percent=True,
+        enabled_reason="a full bus delays every device on it",
     ),
-    _HealthSensor("timeouts", "timeouts", "timeouts", _COUNTER | {"icon": "mdi:timer-alert"}),
-    _HealthSensor(
-        "frame_errors", "frame errors", "frame_errors", _COUNTER | {"icon": "mdi:alert-circle"}
+    HealthSensor(
+        "timeouts",
+        "timeouts",
+        "timeouts",
+        _COUNTER | {"icon": "mdi:timer-alert"},
+        enabled_reason="a silent device or a broken line shows here first",
+    ),
+    HealthSensor(
+        "frame_errors",
+        "frame errors",
+        "frame_errors",
+        _COUNTER | {"icon": "mdi:alert-circle"},
+        enabled_reason="wiring, termination and baud rate problems show here first",
     ),
 )
-_DEVICE_SENSORS = (
-    _HealthSensor(
+DEVICE_HEALTH_SENSORS = (
+    HealthSensor(
         "state",
-        "state",
+        "Modbus state",
         "state",
         {"device_class": "enum", "options": ["online", "offline", "unknown"]},
+        enabled_reason="whether the device answers: the first thing to look at",
     ),
-    _HealthSensor(
+    HealthSensor(
         "latency_p95",
-        "latency p95",
+        "Modbus latency p95",
         "latency_p95_ms",
         {"unit_of_measurement": "ms", "device_class": "duration", "state_class": "measurement"},
     ),
-    _HealthSensor("errors", "errors", "errors", _COUNTER | {"icon": "mdi:alert"}),
-    _HealthSensor("requests", "requests", "requests", _COUNTER | {"icon": "mdi:counter"}),
+    HealthSensor(
+        "errors",
+        "Modbus errors",
+        "errors",
+        _COUNTER | {"icon": "mdi:alert"},
+        enabled_reason="refused and failed requests: the second thing to look at",
+    ),
+    HealthSensor("requests", "Modbus requests", "requests", _COUNTER | {"icon": "mdi:counter"}),
 )
 
 
-def health_components(
-    topics: Topics, bridge_id: str, *, buses: Sequence[str], devices: Sequence[str]
+def bus_health_components(
+    topics: Topics, bridge_id: str, buses: Sequence[str]
 ) -> dict[str, Config]:
-    """The bridge's diagnostic sensors on ``<base>/bridge/health``, by component key
-    (``bus_<bus>_<suffix>``, ``device_<device>_<suffix>``). The health document is
-    retained, so a sensor has a value as soon as Home Assistant subscribes; it is
-    unavailable while the bridge is offline."""
-    identifier = bridge_identifier(topics)
-    shared = {
+    """The bridge's diagnostic sensors of each bus on ``<base>/bridge/health``, by
+    component key ``bus_<bus>_<suffix>``. The health document is retained, so a sensor has
+    a value as soon as Home Assistant subscribes; it is unavailable while the bridge is
+    offline."""
+    components: dict[str, Config] = {}
+    for bus in buses:
+        for sensor in BUS_HEALTH_SENSORS:
+            key = f"bus_{bus}_{sensor.suffix}"
+            name = f"Bus {bus} {sensor.name}"
+            components[key] = _health_sensor(topics, bridge_id, key, name, sensor) | {
+                "availability_topic": topics.bridge_state,
+                "value_template": sensor.template(f"buses['{bus}']"),
+            }
+    return components
+
+
+def device_health_components(topics: Topics, device_id: str) -> dict[str, Config]:
+    """The device's diagnostic sensors on ``<base>/bridge/health``, by component key
+    ``device_<device>_<suffix>``: on the device, with the unique ids and entity ids they
+    had on the bridge device, available while the bridge is online (also while the device
+    is offline: their own availability replaces the device's)."""
+    components: dict[str, Config] = {}
+    for sensor in DEVICE_HEALTH_SENSORS:
+        key = f"device_{device_id}_{sensor.suffix}"
+        components[key] = _health_sensor(topics, topics.base, key, sensor.name, sensor) | {
+            "availability": [{"topic": topics.bridge_state}],
+            "value_template": sensor.template(f"devices['{device_id}']"),
+        }
+    return components
+
+
+def _health_sensor(
+    topics: Topics, bridge_id: str, key: str, name: str, sensor: HealthSensor
+) -> Config:
+    return {
+        "platform": "sensor",
+        "unique_id": f"{bridge_identifier(topics)}_{key}",
+        "default_entity_id": f"sensor.{slug(bridge_id)}_{slug(key)}",
+        "name": name,
         "qos": QOS,
         "entity_category": "diagnostic",
-        "enabled_by_default": True,
+        "enabled_by_default": sensor.enabled_reason is not None,
         "state_topic": topics.bridge_health,
-        "availability_topic": topics.bridge_state,
+        **sensor.options,
     }
-    components: dict[str, Config] = {}
-    for kind, section, ids, sensors in (
-        ("bus", "buses", buses, _BUS_SENSORS),
-        ("device", "devices", devices, _DEVICE_SENSORS),
-    ):
-        for item_id in ids:
-            for sensor in sensors:
-                key = f"{kind}_{item_id}_{sensor.suffix}"
-                components[key] = {
-                    "platform": "sensor",
-                    "unique_id": f"{identifier}_{key}",
-                    "default_entity_id": f"sensor.{slug(bridge_id)}_{slug(key)}",
-                    "name": f"{kind.capitalize()} {item_id} {sensor.name}",
-                    **shared,
-                    "value_template": sensor.template(f"{section}['{item_id}']"),
-                    **sensor.options,
-                }
-    return components
 
 
 def _per_component(payload: dict[str, Any], topics: Topics, node_id: str) -> list[Publish]:

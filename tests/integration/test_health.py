@@ -316,17 +316,22 @@ async def test_health_interval_zero_publishes_no_health_and_no_health_sensors(
 
 @pytest.mark.asyncio
 async def test_health_sensors_in_discovery(mosquitto: Broker) -> None:
-    async with (
-        observing(mosquitto, "homeassistant/device/modbus/config") as observer,
-        running(mosquitto),
-    ):
-        topic = "homeassistant/device/modbus/config"
-        await eventually(lambda: topic in observer.retained, timeout=10)
-        cmps = observer.json(topic)["cmps"]
-    assert "bus_tcp_request_rate" in cmps
-    for device_id in ("pump", "dead", "faulty"):
+    """Per bus on the bridge device; per device on the device itself."""
+    devices = ("pump", "dead", "faulty")
+    topics = ["homeassistant/device/modbus/config"]
+    topics += [f"homeassistant/device/{device_id}/config" for device_id in devices]
+    async with observing(mosquitto, *topics) as observer, running(mosquitto):
+        await eventually(lambda: all(t in observer.retained for t in topics), timeout=10)
+        bridge = observer.json(topics[0])["cmps"]
+        on_devices = {d: observer.json(t)["cmps"] for d, t in zip(devices, topics[1:], strict=True)}
+    assert list(bridge) == ["connection_state"] + [
+        f"bus_tcp_{suffix}"
+        for suffix in ("request_rate", "utilisation", "timeouts", "frame_errors")
+    ]
+    for device_id, cmps in on_devices.items():
+        health = [key for key in cmps if key.startswith(f"device_{device_id}_")]
+        assert len(health) == 4, device_id
         assert cmps[f"device_{device_id}_state"]["state_topic"] == HEALTH
-    assert len(cmps) == 1 + 4 + 3 * 4
 
 
 @pytest.mark.asyncio

@@ -4,12 +4,20 @@ combination. ``pytest -s`` prints the counts per device and category."""
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from typing import Any
 
 import pytest
 
-from bridge.core.discovery import DeviceInfo, Origin, build_device_discovery
+from bridge.core.discovery import (
+    BUS_HEALTH_SENSORS,
+    DEVICE_HEALTH_SENSORS,
+    DeviceInfo,
+    Origin,
+    build_bridge_discovery,
+    build_device_discovery,
+)
 from bridge.core.mapping import Mapping
 from bridge.core.topics import Topics
 from tests.mappings.test_shipped import MAPPINGS, combinations
@@ -32,12 +40,16 @@ def components(
         fast_interval=2.0,
         slow_interval=60.0,
     )
-    return dict(build_device_discovery(device, TOPICS, Origin())["cmps"])
+    return dict(build_device_discovery(device, TOPICS, Origin(), health=True)["cmps"])
 
 
 def reason_for(mapping: Mapping, options: dict[str, str], key: str) -> str | None:
+    """The mapping's reason, or the health sensor's (``device_<id>_<suffix>``)."""
     entity = mapping.active(options).get(key)
-    return None if entity is None else entity.ha.enabled_reason
+    if entity is not None:
+        return entity.ha.enabled_reason
+    health = (s for s in DEVICE_HEALTH_SENSORS if key.endswith(f"_{s.suffix}"))
+    return next(health).enabled_reason
 
 
 @pytest.mark.parametrize("dangerous", [False, True])
@@ -59,6 +71,15 @@ def test_a_commissioning_setting_is_disabled_when_it_can_be_written(name: str) -
             entity = active.get(key)
             if entity is not None and entity.dangerous and config.get("entity_category"):
                 assert not config["enabled_by_default"] or entity.ha.enabled_reason, key
+
+
+def test_the_bridge_enables_its_connection_and_bus_sensors_for_a_reason() -> None:
+    [message] = build_bridge_discovery(TOPICS, Origin(), "modbus", buses=["rs485"])
+    reasons = {f"bus_rs485_{s.suffix}": s.enabled_reason for s in BUS_HEALTH_SENSORS}
+    for key, config in json.loads(message.payload)["cmps"].items():
+        assert config["entity_category"] == "diagnostic", key
+        if config["enabled_by_default"] and key != "connection_state":
+            assert reasons[key], key
 
 
 def test_the_counts_per_device_and_category() -> None:

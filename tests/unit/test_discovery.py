@@ -20,6 +20,8 @@ import pytest
 import bridge
 from bridge.core.codec import limits_of, unit_of
 from bridge.core.discovery import (
+    BUS_HEALTH_SENSORS,
+    DEVICE_HEALTH_SENSORS,
     DeviceInfo,
     Origin,
     Publish,
@@ -613,9 +615,16 @@ def test_bridge_device() -> None:
     assert "platform" not in json.loads(entity.payload)
 
 
-def _health_cmps(**kwargs: Any) -> dict[str, Any]:
-    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge", **kwargs)
+def _health_cmps(buses: tuple[str, ...] = (), devices: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The health sensors of the bridge's ``buses`` and of ``devices`` (on each device)."""
+    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus", buses=buses)
     cmps: dict[str, Any] = json.loads(message.payload)["cmps"]
+    mapping = make_mapping({"x": {"name": "X", "address": 0}})
+    for device_id in devices:
+        payload = build_device_discovery(
+            _device(mapping, id=device_id), TOPICS, ORIGIN, health=True
+        )
+        cmps |= {k: v for k, v in payload["cmps"].items() if k != "x"}
     return {k: v for k, v in cmps.items() if k != "connection_state"}
 
 
@@ -630,20 +639,19 @@ def test_bridge_health_sensors_per_bus_and_device() -> None:
         for item in items
         for suffix in suffixes
     ]
-    assert cmps["device_pump_latency_p95"] == {
+    assert cmps["bus_gw_timeouts"] == {
         "platform": "sensor",
-        "unique_id": "modbus_bridge_device_pump_latency_p95",
-        "default_entity_id": "sensor.modbus_bridge_device_pump_latency_p95",
-        "name": "Device pump latency p95",
+        "unique_id": "modbus_bridge_bus_gw_timeouts",
+        "default_entity_id": "sensor.modbus_bus_gw_timeouts",
+        "name": "Bus gw timeouts",
         "qos": 1,
         "entity_category": "diagnostic",
         "enabled_by_default": True,
         "state_topic": "modbus/bridge/health",
         "availability_topic": "modbus/bridge/state",
-        "value_template": "{{ value_json.devices['pump'].latency_p95_ms }}",
-        "unit_of_measurement": "ms",
-        "device_class": "duration",
-        "state_class": "measurement",
+        "value_template": "{{ value_json.buses['gw'].timeouts }}",
+        "state_class": "total_increasing",
+        "icon": "mdi:timer-alert",
     }
     assert cmps["bus_gw_utilisation"]["value_template"] == (
         "{{ (value_json.buses['gw'].utilisation * 100) | round(1) }}"
@@ -653,10 +661,47 @@ def test_bridge_health_sensors_per_bus_and_device() -> None:
     for key, component in cmps.items():
         assert component["platform"] == "sensor", key
         assert component["entity_category"] == "diagnostic", key
-        assert component["availability_topic"] == "modbus/bridge/state", key
         assert component["state_topic"] == "modbus/bridge/health", key
     unique_ids = [c["unique_id"] for c in cmps.values()]
     assert len(set(unique_ids)) == len(unique_ids)
+
+
+def test_a_device_shows_its_own_health_with_the_ids_it_had_on_the_bridge() -> None:
+    """The sensors moved from the bridge device to the device: same unique ids and entity
+    ids (history stays), named for what they show; available whenever the bridge is,
+    so that an offline device shows 'offline', not 'unavailable'."""
+    payload = build_device_discovery(
+        _device(make_mapping({"x": {"name": "X", "address": 0}}), id="pump"),
+        TOPICS,
+        ORIGIN,
+        health=True,
+    )
+    assert payload["cmps"]["device_pump_latency_p95"] == {
+        "platform": "sensor",
+        "unique_id": "modbus_bridge_device_pump_latency_p95",
+        "default_entity_id": "sensor.modbus_device_pump_latency_p95",
+        "name": "Modbus latency p95",
+        "qos": 1,
+        "entity_category": "diagnostic",
+        "enabled_by_default": False,
+        "state_topic": "modbus/bridge/health",
+        "availability": [{"topic": "modbus/bridge/state"}],
+        "value_template": "{{ value_json.devices['pump'].latency_p95_ms }}",
+        "unit_of_measurement": "ms",
+        "device_class": "duration",
+        "state_class": "measurement",
+    }
+    enabled = [k for k, c in payload["cmps"].items() if k != "x" and c["enabled_by_default"]]
+    assert enabled == ["device_pump_state", "device_pump_errors"]
+    without = build_device_discovery(
+        _device(make_mapping({"x": {"name": "X", "address": 0}}), id="pump"), TOPICS, ORIGIN
+    )
+    assert list(without["cmps"]) == ["x"]
+
+
+def test_an_enabled_health_sensor_says_why() -> None:
+    for sensor in (*BUS_HEALTH_SENSORS, *DEVICE_HEALTH_SENSORS):
+        assert sensor.enabled_reason is None or sensor.enabled_reason.strip(), sensor
 
 
 def test_bridge_health_sensors_read_fields_of_the_health_document() -> None:
@@ -683,25 +728,23 @@ def test_bridge_health_sensors_read_fields_of_the_health_document() -> None:
 
 
 def test_bridge_health_sensor_entity_ids_are_slugs() -> None:
-    cmps = _health_cmps(buses=("line-A",), devices=())
+    cmps = _health_cmps(buses=("line-A",))
     component = cmps["bus_line-A_timeouts"]
     assert component["unique_id"] == "modbus_bridge_bus_line-A_timeouts"
-    assert component["default_entity_id"] == "sensor.modbus_bridge_bus_line_a_timeouts"
+    assert component["default_entity_id"] == "sensor.modbus_bus_line_a_timeouts"
     assert component["value_template"] == "{{ value_json.buses['line-A'].timeouts }}"
 
 
 def test_bridge_health_sensors_in_entity_mode() -> None:
     messages = build_bridge_discovery(
-        TOPICS, ORIGIN, "modbus_bridge", mode="entity", buses=("rs485",), devices=("pump",)
+        TOPICS, ORIGIN, "modbus_bridge", mode="entity", buses=("rs485",)
     )
     topics = [m.topic for m in messages]
-    assert len(topics) == 1 + 4 + 4
+    assert len(topics) == 1 + 4
     assert "homeassistant/sensor/modbus_bridge/bus_rs485_request_rate/config" in topics
-    assert "homeassistant/sensor/modbus_bridge/device_pump_state/config" in topics
-    for message in messages:
-        payload = json.loads(message.payload)
-        assert "platform" not in payload
-        assert payload["device"]["identifiers"] == ["modbus_bridge"]
+    device = _device(make_mapping({"x": {"name": "X", "address": 0}}), id="pump")
+    messages = build_discovery(device, TOPICS, ORIGIN, mode="entity", health=True)
+    assert "homeassistant/sensor/pump/device_pump_state/config" in [m.topic for m in messages]
 
 
 @pytest.mark.parametrize(
@@ -789,13 +832,12 @@ def test_shipped_mapping_snapshot(name: str) -> None:
     """What Home Assistant gets for each shipped mapping: one config, once, with the units
     and limits read from the device (bridge/discovery_publisher.py waits for them)."""
     device = _shipped(name)
-    _check_snapshot(name, build_device_discovery(device, TOPICS, ORIGIN, **_as_read(device)))
+    payload = build_device_discovery(device, TOPICS, ORIGIN, health=True, **_as_read(device))
+    _check_snapshot(name, payload)
 
 
 def test_bridge_snapshot() -> None:
-    [message] = build_bridge_discovery(
-        TOPICS, ORIGIN, "modbus_bridge", buses=("rs485",), devices=("pump-1",)
-    )
+    [message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge", buses=("rs485",))
     _check_snapshot("bridge", json.loads(message.payload))
 
 
