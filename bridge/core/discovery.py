@@ -42,12 +42,12 @@ from typing import Any, Literal
 
 from bridge import __version__
 from bridge.core.codec import Value
+from bridge.core.discovery_alarms import alarms_config
 from bridge.core.discovery_entity import (
     QOS,
     ComponentContext,
     Config,
     Limits,
-    alarms_config,
     component_config,
     slug,
 )
@@ -162,7 +162,7 @@ def device_components(
         if config is not None:
             components[key] = config
     if any(entity.alarm for entity in active.values()):
-        components[ALARMS_KEY] = alarms_config(context)
+        components[ALARMS_KEY] = alarms_config(context, active)
     return components
 
 

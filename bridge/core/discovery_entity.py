@@ -47,7 +47,6 @@ STATE_TRUE = "True"
 STATE_FALSE = "False"
 QOS = 1
 TEXT_MAX = 255  # Home Assistant's longest state
-ALARMS_TEMPLATE = f"{{{{ (value_json.alarms | join(', ') or 'none')[:{TEXT_MAX}] }}}}"
 _READ_ONLY = (Component.SENSOR, Component.BINARY_SENSOR)
 _SLUG = re.compile(r"[^a-z0-9_]+")
 
@@ -148,18 +147,6 @@ def component_config(key: str, entity: Entity, context: ComponentContext) -> Con
     if platform in _READ_ONLY:
         config["expire_after"] = context.expire_after(entity.poll_class)
     return config
-
-
-def alarms_config(context: ComponentContext) -> Config:
-    """The ``alarms`` component: active alarm names joined, or ``none``."""
-    config = base_config("alarms", "Active alarms", Component.SENSOR, context)
-    return config | {
-        "enabled_by_default": True,
-        "icon": "mdi:alert",
-        "state_topic": context.topics.device(context.device_id),
-        "value_template": ALARMS_TEMPLATE,
-        "expire_after": context.expire_after(PollClass.FAST),
-    }
 
 
 def shown_readings(

@@ -30,6 +30,7 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
+from bridge.core.discovery_alarms import alarm_names
 from bridge.core.discovery_entity import admitted, shown_readings
 from bridge.core.entity import Table
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, build_health_report
@@ -527,9 +528,43 @@ def test_the_status_entity_is_published_once_as_itself() -> None:
         "enabled_by_default": True,
         "icon": "mdi:alert",
         "state_topic": STATE,
-        "value_template": "{{ (value_json.alarms | join(', ') or 'none')[:255] }}",
+        "value_template": (
+            '{% set n = {"trip":"Trip"} %}{% set text %}{% for k in value_json.alarms %}'
+            "{{ n.get(k, k | replace('_', ' ') | capitalize) }}"
+            "{{ ', ' if not loop.last else '' }}{% endfor %}{% endset %}"
+            "{{ (text or 'none')[:255] }}"
+        ),
+        "json_attributes_topic": STATE,
+        "json_attributes_template": "{{ {'keys': value_json.alarms} | tojson }}",
         "expire_after": 602,
     }
+
+
+def test_active_alarms_are_shown_by_name() -> None:
+    """The state document lists keys and fault labels; Home Assistant shows names (the
+    device's name taken off) and fault labels in words, not a normal code's label."""
+    entities = {
+        "alarm_dry_running": {"name": "Dry running", "address": 0, "bit": 0, "alarm": True},
+        "common_shutdown": {"name": "Pump shutdown", "address": 0, "bit": 1, "alarm": True},
+        "fault": {
+            "name": "Fault",
+            "address": 1,
+            "alarm": True,
+            "enum": {0: "no_fault", 1: "dc_bus_undervoltage", 2: "ok_too"},
+            "normal": [0, 2],
+        },
+        "level": {"name": "Level", "address": 2},
+    }
+    mapping = make_mapping(entities)
+    assert alarm_names(mapping.active(), "Pump") == {
+        "alarm_dry_running": "Dry running",
+        "common_shutdown": "Shutdown",
+        "dc_bus_undervoltage": "Dc bus undervoltage",
+    }
+    template = _cmps(entities, name="Pump")["alarms"]["value_template"]
+    assert template.startswith(
+        '{% set n = {"alarm_dry_running":"Dry running","common_shutdown":"Shutdown",'
+    )
 
 
 def test_a_boolean_status_is_its_own_binary_sensor_only() -> None:

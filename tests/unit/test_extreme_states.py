@@ -13,19 +13,24 @@ from typing import Any
 
 import pytest
 
-from bridge.core.discovery_entity import ALARMS_TEMPLATE, TEXT_MAX
+from bridge.core.discovery_entity import TEXT_MAX
 from bridge.core.mapping import builtin_mapping_names
 from tests.extreme_states import Case, cases
 
 _PLAIN = re.compile(r"^\{\{ value_json\.(\w+) \}\}$")
 _TEXT = re.compile(r"^\{\{ value_json\.(\w+) if value_json\.\1 is not none else '' \}\}$")
+_ALARMS = re.compile(
+    r"^\{% set n = (\{.*\}) %\}\{% set text %\}\{% for k in value_json\.alarms %\}"
+)
 
 
 def rendered(template: str, state: dict[str, Any]) -> str:
     """What Home Assistant's template renders for the bridge's templates (Jinja prints
     Python values: None, True, 12.5)."""
-    if template == ALARMS_TEMPLATE:
-        return (", ".join(state["alarms"]) or "none")[:TEXT_MAX]
+    if match := _ALARMS.match(template):  # discovery_alarms.alarms_template
+        names = json.loads(match.group(1))
+        shown = [names.get(k, k.replace("_", " ").capitalize()) for k in state["alarms"]]
+        return (", ".join(shown) or "none")[:TEXT_MAX]
     if match := _TEXT.match(template):
         value = state[match.group(1)]
         return "" if value is None else str(value)
