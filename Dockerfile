@@ -92,18 +92,22 @@ USER 10001
 # and the web page (bridge.web: {enabled: true, host: 0.0.0.0, token_env: ...}).
 EXPOSE 9464 8099
 
-# Health = the running bridge answers on its metrics endpoint, and no bus is down.
-# /health is served on the bridge's own event loop (bridge/metrics.py), so a crashed
-# bridge or a blocked loop fails the check, which `modbus-mqtt-bridge check` (a config
-# validation) or a "PID 1 exists" test would not; it answers 503 with the reason while a
-# bus is down (a serial port that cannot be opened, a gateway that does not answer), and
-# the check prints that reason (docker inspect shows it under .State.Health.Log).
+# Health = the bridge process is alive and serving: it answers on its metrics endpoint.
+# /health is served on the bridge's own event loop, in the task group that also runs the
+# MQTT session and its reconnect loop (bridge/metrics.py), so a crashed bridge or a
+# blocked loop fails the check, which `modbus-mqtt-bridge check` (a config validation) or
+# a "PID 1 exists" test would not. A bus that is down does not fail it: restarting the
+# container brings no unplugged gateway back and takes every other device offline each
+# time. Bus and device state stay in <base>/bridge/health, the diagnostic entities, the
+# web page and GET /health/buses (503 with the reason while a bus is down, for a monitor
+# that wants it); /health names the buses down in its answer (docker inspect shows it
+# under .State.Health.Log).
 # It needs bridge.metrics.enabled: true in the config (host 127.0.0.1 is enough for the
 # check, 0.0.0.0 to let Prometheus scrape it); set BRIDGE_HEALTH_URL for another port.
 # Without metrics, turn the check off (compose: healthcheck: {disable: true}).
 # Plain python + urllib: the slim image has no curl or wget, and none is added.
 HEALTHCHECK --interval=30s --timeout=5s --start-period=30s --retries=3 \
-    CMD ["python", "-c", "import os, sys, urllib.error, urllib.request\ntry:\n    urllib.request.urlopen(os.environ['BRIDGE_HEALTH_URL'], timeout=4).read()\nexcept urllib.error.HTTPError as refused:\n    sys.exit(refused.read().decode(errors='replace'))\nexcept OSError as failed:\n    sys.exit(f'no answer from the bridge: {failed}')"]
+    CMD ["python", "-c", "import os, sys, urllib.error, urllib.request\ntry:\n    print(urllib.request.urlopen(os.environ['BRIDGE_HEALTH_URL'], timeout=4).read().decode(errors='replace'), end='')\nexcept urllib.error.HTTPError as refused:\n    sys.exit(refused.read().decode(errors='replace'))\nexcept OSError as failed:\n    sys.exit(f'no answer from the bridge: {failed}')"]
 
 ENTRYPOINT ["modbus-mqtt-bridge"]
 CMD ["run", "-c", "/config/config.yaml"]

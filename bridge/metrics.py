@@ -6,11 +6,21 @@ listens on ``config.host:config.port`` with the web page's HTTP server on the ev
 (bridge/web/http.py: bounded requests, timeouts, a connection cap; ``GET /metrics``,
 also ``/``), and each scrape reads a fresh ``source()`` snapshot, on the
 loop's thread, so nothing is shared across threads. Plain Prometheus text by default,
-OpenMetrics when the scraper's Accept header asks for it. ``GET /health`` is the container
-health check: 200 and ``{"status": "ok"}`` while no bus is down, 503 and the reason of
-each bus that is down (``{"status": "down", "buses": {"rs485": "rs485: cannot open
-/dev/ttyUSB0: Permission denied ..."}}``) otherwise. It stops listening (and drops
-open connections) when the block ends. An address that cannot be bound raises OSError
+OpenMetrics when the scraper's Accept header asks for it.
+
+``GET /health`` is the container's health check (the image's HEALTHCHECK, the add-on's
+watchdog): is the bridge alive and serving? An answer at all says so: it is served on the
+bridge's event loop, in the same task group as the MQTT session and its reconnect loop
+(which never gives up), so a blocked loop gives no answer in time and a bridge whose run
+ended serves nothing. It answers 200 and ``{"status": "ok"}`` whatever the field devices
+do (a bridge standing by for another one on its base topic is alive too), with
+``buses_down`` listing the buses that are down, if any: restarting the bridge would not
+bring an unplugged gateway back, and would take every other device offline meanwhile.
+``GET /health/buses`` is the bus detail: 200 and ``{"status": "ok"}`` while no bus is
+down, 503 and the reason of each bus that is down (``{"status": "down", "buses":
+{"rs485": "rs485: cannot open /dev/ttyUSB0: Permission denied ..."}}``) otherwise, for a
+monitor that wants to be told. It stops listening (and drops open connections) when the
+block ends. An address that cannot be bound raises OSError
 naming it before anything else starts.
 
 The numbers are the health document's (``bridge.core.health_report``), counters since
@@ -60,6 +70,7 @@ from bridge.web.http import Request, Response, listening
 log = logging.getLogger(__name__)
 PATHS = frozenset({"/", "/metrics"})
 HEALTH_PATH = "/health"
+BUS_HEALTH_PATH = "/health/buses"
 
 Source = Callable[[], Snapshot]
 
@@ -186,12 +197,25 @@ class MetricsApp:
             return Response(HTTPStatus.METHOD_NOT_ALLOWED, b"GET only\n")
         if request.path == HEALTH_PATH:
             return self.health()
+        if request.path == BUS_HEALTH_PATH:
+            return self.bus_health()
         if request.path not in PATHS:
-            return Response(HTTPStatus.NOT_FOUND, b"metrics are on /metrics, health on /health\n")
+            return Response(
+                HTTPStatus.NOT_FOUND,
+                b"metrics are on /metrics, health on /health and /health/buses\n",
+            )
         encoder, content_type = choose_encoder(request.headers.get("accept", ""))
         return Response(HTTPStatus.OK, encoder(self.registry), content_type)
 
     def health(self) -> Response:
+        """200: the bridge answers; the buses that are down are named, not held against it."""
+        down = sorted(buses_down(self.source()))
+        document: dict[str, object] = {"status": "ok"}
+        if down:
+            document["buses_down"] = down
+        return Response(HTTPStatus.OK, json.dumps(document).encode() + b"\n", "application/json")
+
+    def bus_health(self) -> Response:
         """503 with each bus that is down and why, else 200."""
         down = buses_down(self.source())
         document = {"status": "down", "buses": down} if down else {"status": "ok"}

@@ -39,7 +39,7 @@ from bridge.config import (
 )
 from bridge.core.health_report import BusSnapshot, Snapshot
 from bridge.core.mapping import builtin_mapping_names
-from bridge.metrics import HEALTH_PATH, serve_metrics
+from bridge.metrics import BUS_HEALTH_PATH, HEALTH_PATH, serve_metrics
 from bridge.simulate_cli import build_simulator
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -419,7 +419,7 @@ def test_dockerfile_labels_follow_the_build_args_and_the_package_version() -> No
     assert args["VERSION"] == project["project"]["version"] == __version__
 
 
-def test_dockerfile_healthcheck_asks_the_bridge_whether_a_bus_is_down() -> None:
+def test_dockerfile_healthcheck_asks_the_bridge_whether_it_is_alive() -> None:
     runtime = _stages()[-1]
     check = _one(runtime, "HEALTHCHECK")
     options, _, command = check.partition(" CMD ")
@@ -452,10 +452,11 @@ def run_healthcheck(url: str) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.mark.asyncio
-async def test_healthcheck_fails_with_the_reason_while_a_bus_is_down() -> None:
+async def test_healthcheck_says_alive_while_a_bus_is_down_and_fails_when_nothing_answers() -> None:
     """The HEALTHCHECK command against the bridge's real metrics server: exit 0 while the
-    buses are up, exit 1 printing the reason while one is down, exit 1 when nothing
-    answers (the bridge is gone)."""
+    buses are up, exit 0 too while one is down (restarting the bridge brings no gateway
+    back), naming it in its output; exit 1 when nothing answers (the bridge is gone).
+    /health/buses keeps the detail: 503 with the reason while the bus is down."""
     reason = "rs485: cannot open /dev/ttyUSB0: Permission denied [EACCES] (...)"
     up = BusSnapshot("rs485", "rtu", connected=True)
     down = BusSnapshot("rs485", "rtu", connected=False, down_reason=reason)
@@ -471,11 +472,17 @@ async def test_healthcheck_fails_with_the_reason_while_a_bus_is_down() -> None:
     async with serve_metrics(MetricsConfig(enabled=True, port=port), source):
         healthy = await asyncio.to_thread(run_healthcheck, url)
         current[0] = down
-        unhealthy = await asyncio.to_thread(run_healthcheck, url)
+        still = await asyncio.to_thread(run_healthcheck, url)
+        detail = await asyncio.to_thread(
+            run_healthcheck, f"http://127.0.0.1:{port}{BUS_HEALTH_PATH}"
+        )
     gone = await asyncio.to_thread(run_healthcheck, url)
     assert (healthy.returncode, healthy.stderr) == (0, "")
-    assert unhealthy.returncode == 1
-    assert json.loads(unhealthy.stderr) == {"status": "down", "buses": {"rs485": reason}}
+    assert json.loads(healthy.stdout) == {"status": "ok"}
+    assert (still.returncode, still.stderr) == (0, "")
+    assert json.loads(still.stdout) == {"status": "ok", "buses_down": ["rs485"]}
+    assert detail.returncode == 1
+    assert json.loads(detail.stderr) == {"status": "down", "buses": {"rs485": reason}}
     assert gone.returncode == 1
     assert gone.stderr.startswith("no answer from the bridge:")
 

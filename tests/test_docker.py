@@ -20,6 +20,8 @@ import signal
 import subprocess
 import sys
 import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -243,9 +245,10 @@ def test_a_bridge_on_a_serial_port_of_another_group(
     image: str, serial_line: str, mosquitto: Broker, tmp_path: Path, joined: bool
 ) -> None:
     """The adapter belongs to a host group the image's user is not in (gid 4321, as on a
-    host whose dialout is not 20): the container turns unhealthy and its health log and
-    log say why and what to pass (--group-add 4321). With --group-add 4321 it is healthy
-    and publishes the pump's values."""
+    host whose dialout is not 20): the container stays healthy (the bridge is alive; a
+    restart would not fix the group), its health log names the bus down, and its log and
+    /health/buses say why and what to pass (--group-add 4321). With --group-add 4321 it
+    is healthy and publishes the pump's values."""
     gid = 4321
     os.chown(serial_line, 0, gid)
     os.chmod(serial_line, 0o660)
@@ -267,9 +270,11 @@ def test_a_bridge_on_a_serial_port_of_another_group(
             wait_for_health(name, "healthy")
             assert first_message(mosquitto, "modbus/borehole_pump/availability") == b"online"
             return
-        state = wait_for_health(name, "unhealthy")
-        output = state["Log"][-1]["Output"]
-        reason = json.loads(output)["buses"]["rs485"]
+        state = wait_for_bus_down(name)
+        assert state["Status"] == "healthy"
+        refused = bus_health(metrics_port)
+        assert refused.code == 503
+        reason = json.loads(refused.read())["buses"]["rs485"]
         assert "cannot open /dev/ttyUSB0: Permission denied [EACCES]" in reason
         assert f"group {gid} and uid 10001 is not in it" in reason
         assert f"--group-add {gid}" in reason
@@ -277,6 +282,28 @@ def test_a_bridge_on_a_serial_port_of_another_group(
         assert f"--group-add {gid}" in logs
     finally:
         docker("rm", "-f", "-v", name, check=False)
+
+
+def wait_for_bus_down(container: str, timeout: float = 45) -> dict[str, Any]:
+    """The container's health once its check's output names a bus down."""
+    deadline = time.monotonic() + timeout
+    while True:
+        current = health(container)
+        log = current.get("Log") or [{}]
+        if "buses_down" in str(log[-1].get("Output", "")):
+            return current
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{container}: no bus down in {current}")
+        time.sleep(0.5)
+
+
+def bus_health(port: int) -> urllib.error.HTTPError:
+    """GET /health/buses on the host, expected to be refused (a bus is down)."""
+    try:
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/health/buses", timeout=5)
+    except urllib.error.HTTPError as refused:
+        return refused
+    raise AssertionError("/health/buses answered 200 with a bus down")
 
 
 def first_message(

@@ -370,10 +370,10 @@ def test_metrics_port_in_use_from_the_command_line(
     assert "Traceback" not in error
 
 
-def health_check(port: int) -> tuple[int, dict[str, Any]]:
-    """What the image's HEALTHCHECK sees on /health: the status code and the document."""
+def health_check(port: int, path: str = "/health") -> tuple[int, dict[str, Any]]:
+    """What a GET of ``path`` sees: the status code and the document."""
     try:
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=5) as answer:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as answer:
             return answer.status, json.loads(answer.read())
     except urllib.error.HTTPError as refused:
         return refused.code, json.loads(refused.read())
@@ -383,9 +383,10 @@ def health_check(port: int) -> tuple[int, dict[str, Any]]:
 async def test_health_says_a_bus_is_down_and_why_until_the_adapter_appears(
     mosquitto: Broker, tmp_path: Path
 ) -> None:
-    """A serial bus whose adapter is missing makes /health answer 503 with the reason
-    (and bridge/health carry it), while the TCP bus polls; once the adapter appears
-    (a pty linked at the configured path) the bus opens and /health answers 200."""
+    """A serial bus whose adapter is missing makes /health/buses answer 503 with the reason
+    (and bridge/health carry it), while the TCP bus polls and /health (the container's
+    check) answers 200 naming the bus; once the adapter appears (a pty linked at the
+    configured path) the bus opens and /health/buses answers 200."""
     adapter = tmp_path / "ttyUSB0"
     metrics_port = free_port()
     async with (
@@ -406,7 +407,9 @@ async def test_health_says_a_bus_is_down_and_why_until_the_adapter_appears(
                 lambda: latest(observer).get("buses", {}).get("rs485", {}).get("error"),
                 timeout=10,
             )
-            status, document = await asyncio.to_thread(health_check, metrics_port)
+            alive = await asyncio.to_thread(health_check, metrics_port)
+            assert alive == (200, {"status": "ok", "buses_down": ["rs485"]})
+            status, document = await asyncio.to_thread(health_check, metrics_port, "/health/buses")
             assert status == 503
             assert document["status"] == "down"
             assert list(document["buses"]) == ["rs485"]  # the TCP bus is up
@@ -421,8 +424,9 @@ async def test_health_says_a_bus_is_down_and_why_until_the_adapter_appears(
                 lambda: latest(observer).get("buses", {}).get("rs485", {}).get("connected"),
                 timeout=20,
             )
-            status, document = await asyncio.to_thread(health_check, metrics_port)
-            assert (status, document) == (200, {"status": "ok"})
+            for path in ("/health", "/health/buses"):
+                status, document = await asyncio.to_thread(health_check, metrics_port, path)
+                assert (status, document) == (200, {"status": "ok"}), path
             assert latest(observer)["buses"]["rs485"]["error"] is None
         finally:
             await cancel(task)
