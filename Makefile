@@ -9,7 +9,7 @@ DEV    := $(VENV)/.installed-dev-$(SUM)
 RUN    := $(VENV)/.installed-demo-$(SUM)
 SOURCES := $(shell find bridge mappings -name '*.py' -o -name '*.yaml' -o -name py.typed)
 
-.PHONY: test test-other-python check lint demo docs clean
+.PHONY: test test-other-python test-ha check lint demo docs clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -49,6 +49,23 @@ else
 	$(OTHER_VENV)/bin/pytest -p no:cacheprovider -n 2 --dist loadfile $(OTHER_TESTS)
 endif
 
+# The bridge against real Home Assistant, the oldest supported release and the current one
+# (slow, so not in `make test`): each installed once under .ha/ (tools/ha_env.sh: a Debian
+# testing chroot with Python 3.13 and 3.14, one venv per version; needs root and Debian's
+# apt), then per version tools/check_ha_discovery.py on the discovery snapshots and the
+# extreme states (tools/ha_check.sh) and tests/ha (a headless Home Assistant on a private
+# broker: entity ids, the documented ids, a clean log over start, config change and stop).
+HA_ROOT     ?= .ha/forky
+HA_VERSIONS ?= 2025.10.4 2026.11.0
+
+test-ha: $(DEV)
+	tools/ha_env.sh $(HA_ROOT) $(HA_VERSIONS)
+	for version in $(HA_VERSIONS); do \
+		tools/ha_check.sh $(HA_ROOT) $$version $(BIN)/python || exit 1; \
+		HA_ROOT=$(HA_ROOT) HA_VERSION=$$version \
+			$(BIN)/pytest -p no:cacheprovider -p no:xdist tests/ha -q -rs || exit 1; \
+	done
+
 check: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check bridge tests
@@ -66,4 +83,4 @@ docs: $(DEV)
 	$(BIN)/modbus-mqtt-bridge schema --markdown > docs/config.md
 
 clean:
-	rm -rf $(VENV) $(OTHER_VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(OTHER_VENV) .ha build *.egg-info .pytest_cache .mypy_cache .ruff_cache
