@@ -2,7 +2,8 @@
 
 It serves the five shipped mappings as simulated units 1..5 on a loopback Modbus TCP
 port, picks a broker (``--mqtt-url``, else 127.0.0.1:1883 if something answers there,
-else an embedded one), runs the real bridge against them with Home Assistant discovery,
+else a private ``mosquitto`` of its own when the binary is installed, else an embedded one
+(amqtt)), runs the real bridge against them with Home Assistant discovery,
 and shows a live table of the devices, their state and the topics to subscribe to; the
 web page (bridge/web) runs on loopback, its URL printed with the table.
 Ctrl-C (or SIGTERM) stops everything.
@@ -23,6 +24,7 @@ from typing import Any, TextIO
 from bridge.app import Bridge
 from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
+from bridge.demo_broker import find_mosquitto, private_mosquitto
 from bridge.demo_control import FAULT_REQUEST, fault_request
 from bridge.demo_view import DemoView, mosquitto_options, render_plain, render_table
 from bridge.errors import BridgeError, ConfigError, InputError, first_of
@@ -36,8 +38,9 @@ The five seed devices, simulated, on MQTT in seconds (no hardware needed).
 
 It serves the five shipped mappings as simulated units 1..5 on a loopback Modbus TCP
 port, picks a broker (--mqtt-url, else 127.0.0.1:1883 if something answers there, else
-an embedded one), runs the real bridge against them with Home Assistant discovery, and
-shows a live table of the devices, their state and the topics to subscribe to.
+a private mosquitto when it is installed, else an embedded one), runs the real bridge
+against them with Home Assistant discovery, and shows a live table of the devices, their
+state and the topics to subscribe to.
 Ctrl-C (or SIGTERM) stops everything."""
 LOOPBACK = "127.0.0.1"
 DEFAULT_MODBUS_PORT = 5020
@@ -64,8 +67,17 @@ SEEDS = (
 @dataclass(frozen=True, slots=True)
 class BrokerChoice:
     url: str
-    how: str  # "given", "local" or "embedded"
+    how: str  # "given", "local", PRIVATE or EMBEDDED
     protocol: str = "5"
+
+    @property
+    def own(self) -> bool:
+        """The demo started it: anonymous, on loopback, stopped with the demo."""
+        return self.how in (PRIVATE, EMBEDDED)
+
+
+PRIVATE = "private mosquitto"
+EMBEDDED = "embedded"
 
 
 def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -102,8 +114,14 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--local-broker",
         default=f"{LOOPBACK}:1883",
         metavar="HOST:PORT",
-        help="where to look for a running broker before starting an embedded one "
-        "(default %(default)s; the embedded one takes this port when it is free)",
+        help="where to look for a running broker before starting one of its own (a "
+        "private mosquitto if installed, else an embedded one; default %(default)s: the "
+        "demo's broker takes this port when it is free)",
+    )
+    demo.add_argument(
+        "--embedded-broker",
+        action="store_true",
+        help="when no broker answers, run the embedded one (amqtt) even if mosquitto is installed",
     )
     demo.add_argument("--base-topic", default="modbus", metavar="TOPIC")
     demo.add_argument(
@@ -150,14 +168,14 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
         group.create_task(simulator.serve_tcp(LOOPBACK, port, "socket"), name="simulator")
         async with asyncio.timeout(10):
             await simulator.ready.wait()
-        async with _broker(args.mqtt_url, args.local_broker) as broker:
+        async with _broker(args.mqtt_url, args.local_broker, args.embedded_broker) as broker:
             web_port = _free_port(DEFAULT_WEB_PORT)
             loaded = demo_config(broker, simulator.port, args, web_port)
             bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
             units = {seed.id: seed.unit for seed in SEEDS}
             bridge.extra_requests[FAULT_REQUEST] = fault_request(simulator, units)
             mqtt = loaded.config.mqtt
-            view = DemoView(bridge, broker_url=mqtt.url, broker_how=_how(broker, mqtt))
+            view = DemoView(bridge, broker_url=mqtt.broker_url, broker_how=_how(broker, mqtt))
             view.modbus = f"{LOOPBACK}:{simulator.port}"
             fault = f"{args.base_topic}/bridge/request/{FAULT_REQUEST}"
             view.extra += [
@@ -213,7 +231,7 @@ def demo_config(
         "password_file": args.password_file,
         "password_env": args.password_env,
     }
-    if broker.how == "embedded":  # anonymous: the login options are for a real broker
+    if broker.own:  # anonymous: the login options are for a real broker
         login = {}
     mqtt: dict[str, Any] = {
         "url": broker.url,
@@ -267,8 +285,9 @@ def _seeds_config(mqtt: dict[str, Any], modbus_port: int, web_port: int) -> Load
 
 
 @contextlib.asynccontextmanager
-async def _broker(url: str | None, local: str) -> AsyncIterator[BrokerChoice]:
-    """The broker given, else a local one that answers, else an embedded one."""
+async def _broker(url: str | None, local: str, embedded: bool) -> AsyncIterator[BrokerChoice]:
+    """The broker given, else a local one that answers, else a private mosquitto, else an
+    embedded one (both on ``local``'s port if it is free)."""
     if url is not None:
         yield BrokerChoice(url, "given")
         return
@@ -277,8 +296,13 @@ async def _broker(url: str | None, local: str) -> AsyncIterator[BrokerChoice]:
         yield BrokerChoice(f"mqtt://{host}:{port_text}", "local")
         return
     port = _free_port(int(port_text))
-    async with embedded_broker(LOOPBACK, port) as embedded:
-        yield BrokerChoice(embedded, "embedded", PROTOCOL)
+    mosquitto = None if embedded else find_mosquitto()
+    if mosquitto is not None:
+        async with private_mosquitto(mosquitto, LOOPBACK, port) as private:
+            yield BrokerChoice(private, PRIVATE)
+        return
+    async with embedded_broker(LOOPBACK, port) as inside:
+        yield BrokerChoice(inside, EMBEDDED, PROTOCOL)
 
 
 async def _answers(host: str, port: int) -> bool:

@@ -52,7 +52,7 @@ class DemoView:
             f"web page: {page_url(self.bridge.loaded.config.bridge.web)}",
             f"topics:  {base}/<device> (JSON), {base}/<device>/<key>/set",
             f"watch:   mosquitto_sub{client} -t '{base}/#' -v",
-            f"command: mosquitto_pub{client} -t {base}/{first}/start_stop/set -m ON",
+            f"command: mosquitto_pub{client} -t {base}/{first}/start_stop/set -m OFF",
             *self.extra,
             "Home Assistant: its MQTT integration on this broker shows the devices.",
         ]

@@ -10,10 +10,11 @@ import asyncio
 import json
 import os
 import pty
+import shutil
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from bridge.config import MqttConfig
 from bridge.demo import SEEDS
 from bridge.mqtt import MqttClient
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
-from tests.integration.mosquitto import Broker
+from tests.integration.mosquitto import Broker, has_mosquitto
 from tests.integration.test_simulate_cli import free_port
 
 DEVICES = {seed.id for seed in SEEDS}
@@ -211,14 +212,117 @@ async def test_demo_uses_a_local_broker_that_answers(mosquitto: Broker) -> None:
 
 
 @pytest.mark.asyncio
-async def test_demo_starts_an_embedded_broker_when_none_answers() -> None:
+async def test_demo_starts_an_embedded_broker_when_none_answers_if_asked() -> None:
     port = free_port()
-    with demo("--local-broker", f"127.0.0.1:{port}") as process:
+    with demo("--local-broker", f"127.0.0.1:{port}", "--embedded-broker") as process:
         lines = await read_until(process, "ready:")
         url = f"mqtt://127.0.0.1:{port}"
         assert f"MQTT broker: {url} (embedded)" in lines
         await discovery_of_every_device(url, version="3.1.1")
         await stop(process)
+
+
+@pytest.mark.asyncio
+async def test_demo_starts_a_private_mosquitto_when_none_answers_and_stops_it() -> None:
+    if not has_mosquitto():
+        pytest.skip("no /usr/sbin/mosquitto")
+    port = free_port()
+    with demo("--local-broker", f"127.0.0.1:{port}") as process:
+        lines = await read_until(process, "ready:")
+        url = f"mqtt://127.0.0.1:{port}"
+        assert f"MQTT broker: {url} (private mosquitto)" in lines
+        await discovery_of_every_device(url)
+        await stop(process)
+    with pytest.raises(ConnectionRefusedError):  # gone with the demo
+        await asyncio.open_connection("127.0.0.1", port)
+
+
+def printed_commands(lines: list[str]) -> dict[str, str]:
+    """The banner's shell commands by label (``watch``, ``command``, ``fault``), a line
+    that ends in a backslash joined with the next, as a shell reads them."""
+    text = "\n".join(lines).replace("\\\n", " ")
+    found = {}
+    for line in text.splitlines():
+        label, sep, command = line.partition(":")
+        if sep and command.strip().startswith("mosquitto_"):
+            found[label] = command.strip()
+    return found
+
+
+class Watch:
+    """A printed ``mosquitto_sub ... -v`` running in a shell; its lines as topic, payload."""
+
+    def __init__(self, process: asyncio.subprocess.Process) -> None:
+        self.process = process
+
+    async def until(self, topic: str, holds: Callable[[str], bool], within: float = 20) -> str:
+        assert self.process.stdout is not None
+        async with asyncio.timeout(within):
+            while line := (await self.process.stdout.readline()).decode():
+                got, _, payload = line.rstrip("\n").partition(" ")
+                if got == topic and holds(payload):
+                    return payload
+        raise AssertionError(f"mosquitto_sub ended before {topic}")
+
+
+async def shell(command: str) -> None:
+    """``command`` as a user types it (bash), which must succeed within 10 s."""
+    process = await asyncio.create_subprocess_exec("bash", "-c", command)
+    async with asyncio.timeout(10):
+        assert await process.wait() == 0, command
+
+
+@pytest.mark.parametrize("path", ["given", "private mosquitto", "embedded"])
+@pytest.mark.asyncio
+async def test_the_printed_commands_work_as_printed(path: str, tmp_path: Path) -> None:
+    """The banner's watch, command and fault lines, run verbatim with mosquitto_sub and
+    mosquitto_pub (QoS 0, as printed): the watch shows the pump, the command stops it, the
+    fault request is answered; on an existing broker, a private mosquitto and the
+    embedded broker."""
+    if shutil.which("mosquitto_pub") is None or shutil.which("mosquitto_sub") is None:
+        pytest.skip("mosquitto_pub/mosquitto_sub not installed (Debian: mosquitto-clients)")
+    if path != "embedded" and not has_mosquitto():
+        pytest.skip("no /usr/sbin/mosquitto")
+    given = Broker(tmp_path)
+    if path == "given":
+        given.start()
+    args = {
+        "given": ("--mqtt-url", given.url),
+        "private mosquitto": ("--local-broker", f"127.0.0.1:{free_port()}"),
+        "embedded": ("--local-broker", f"127.0.0.1:{free_port()}", "--embedded-broker"),
+    }[path]
+    try:
+        with demo(*args) as process:
+            lines = await read_until(process, "ready:")
+            assert any(line.endswith(f"({path})") for line in lines), lines
+            commands = printed_commands(lines)
+            assert set(commands) == {"watch", "command", "fault"}, lines
+            sub = await asyncio.create_subprocess_exec(
+                "bash",
+                "-c",
+                f"exec {commands['watch']}",
+                stdout=asyncio.subprocess.PIPE,
+                limit=2**22,  # modbus/bridge/info is long
+            )
+            watch = Watch(sub)
+            try:
+                running = await watch.until(
+                    "modbus/borehole_pump", lambda p: json.loads(p)["status"] == "running"
+                )
+                assert json.loads(running)["start_stop"] is True
+                await shell(commands["command"])
+                await watch.until(
+                    "modbus/borehole_pump", lambda p: json.loads(p)["status"] == "off"
+                )
+                await shell(commands["fault"])
+                answer = await watch.until("modbus/bridge/response/demo/fault", lambda p: True)
+                assert json.loads(answer)["data"]["faults"] == ["alarm_dry_running"]
+            finally:
+                sub.terminate()
+                await sub.wait()
+            await stop(process)
+    finally:
+        given.stop()
 
 
 def test_a_bad_local_broker_address_is_refused_before_anything_starts() -> None:
