@@ -61,7 +61,7 @@ from homeassistant.const import __version__ as ha_version  # type: ignore[import
 from homeassistant.core import HomeAssistant  # type: ignore[import-not-found]
 from homeassistant.helpers.template import Template  # type: ignore[import-not-found]
 
-_NESTED = re.compile(r"value_json\.(\w+)\['([^']+)'\]\.(\w+)")
+_NESTED = re.compile(r"value_json\.get\('(\w+)', \{\}\)\.get\('([^']+)', \{\}\)\.get\('(\w+)'\)")
 GOLDEN = Path(__file__).resolve().parent.parent / "tests" / "golden" / "discovery"
 PREFIX = "homeassistant"
 READ_ONLY = ("sensor", "binary_sensor")
@@ -215,7 +215,8 @@ class Checker:
 
 def _document(template: str, sample: Any) -> dict[str, Any]:
     """A state document holding ``sample`` where ``template`` reads: a device's flat JSON
-    (``value_json.key``), or the bridge/health report (``value_json.buses['id'].field``)."""
+    (``value_json.key``), or the bridge/health report (``value_json.get('buses', {}).get('id',
+    {}).get('field')``)."""
     nested = _NESTED.search(template)
     if nested is not None:
         section, name, field = nested.groups()

@@ -254,9 +254,15 @@ class HealthSensor:
     percent: bool = False  # a 0..1 fraction shown as %
     enabled_reason: str | None = None
 
-    def template(self, source: str) -> str:
-        value = f"value_json.{source}.{self.field}"
-        return f"{{{{ ({value} * 100) | round(1) }}}}" if self.percent else f"{{{{ {value} }}}}"
+    def template(self, section: str, item: str) -> str:
+        """The field of ``item`` in the report's ``section`` (``buses``, ``devices``); a
+        report without it (sent while the config changed: a device renamed or removed
+        before Home Assistant had its new discovery) renders None, unknown to Home
+        Assistant, instead of a template error in its log."""
+        value = f"value_json.get('{section}', {{}}).get('{item}', {{}}).get('{self.field}')"
+        if not self.percent:
+            return f"{{{{ {value} }}}}"
+        return f"{{% set v = {value} %}}{{{{ none if v is none else (v * 100) | round(1) }}}}"
 
 
 _COUNTER = MappingProxyType({"state_class": "total_increasing"})
@@ -333,7 +339,7 @@ def bus_health_components(
             name = f"Bus {bus} {sensor.name}"
             components[key] = _health_sensor(topics, bridge_id, key, name, sensor) | {
                 "availability_topic": topics.bridge_state,
-                "value_template": sensor.template(f"buses['{bus}']"),
+                "value_template": sensor.template("buses", bus),
             }
     return components
 
@@ -348,7 +354,7 @@ def device_health_components(topics: Topics, device_id: str) -> dict[str, Config
         key = f"device_{device_id}_{sensor.suffix}"
         components[key] = _health_sensor(topics, topics.base, key, sensor.name, sensor) | {
             "availability": [{"topic": topics.bridge_state}],
-            "value_template": sensor.template(f"devices['{device_id}']"),
+            "value_template": sensor.template("devices", device_id),
         }
     return components
 

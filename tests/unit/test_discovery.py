@@ -684,12 +684,13 @@ def test_bridge_health_sensors_per_bus_and_device() -> None:
         "enabled_by_default": True,
         "state_topic": "modbus/bridge/health",
         "availability_topic": "modbus/bridge/state",
-        "value_template": "{{ value_json.buses['gw'].timeouts }}",
+        "value_template": "{{ value_json.get('buses', {}).get('gw', {}).get('timeouts') }}",
         "state_class": "total_increasing",
         "icon": "mdi:timer-alert",
     }
     assert cmps["bus_gw_utilisation"]["value_template"] == (
-        "{{ (value_json.buses['gw'].utilisation * 100) | round(1) }}"
+        "{% set v = value_json.get('buses', {}).get('gw', {}).get('utilisation') %}"
+        "{{ none if v is none else (v * 100) | round(1) }}"
     )
     assert cmps["bus_gw_utilisation"]["unit_of_measurement"] == "%"
     assert cmps["device_meter_state"]["options"] == ["online", "offline", "unknown"]
@@ -721,7 +722,7 @@ def test_a_device_shows_its_own_health_with_the_ids_it_had_on_the_bridge() -> No
         "enabled_by_default": False,
         "state_topic": "modbus/bridge/health",
         "availability": [{"topic": "modbus/bridge/state"}],
-        "value_template": "{{ value_json.devices['pump'].latency_p95_ms }}",
+        "value_template": "{{ value_json.get('devices', {}).get('pump', {}).get('latency_p95_ms') }}",
         "unit_of_measurement": "ms",
         "device_class": "duration",
         "state_class": "measurement",
@@ -750,7 +751,9 @@ def test_bridge_health_sensors_read_fields_of_the_health_document() -> None:
         devices=(DeviceSnapshot("pump-1", "rs485", 1, online=True, latency_p95=0.02),),
     )
     document = build_health_report(snapshot)
-    pattern = re.compile(r"value_json\.(buses|devices)\['([^']+)'\]\.(\w+)")
+    pattern = re.compile(
+        r"value_json\.get\('(buses|devices)', \{\}\)\.get\('([^']+)', \{\}\)\.get\('(\w+)'\)"
+    )
     for key, component in _health_cmps(buses=("rs485",), devices=("pump-1",)).items():
         match = pattern.search(component["value_template"])
         assert match is not None, key
@@ -767,7 +770,10 @@ def test_bridge_health_sensor_entity_ids_are_slugs() -> None:
     component = cmps["bus_line-A_timeouts"]
     assert component["unique_id"] == "modbus_bridge_bus_line-A_timeouts"
     assert component["default_entity_id"] == "sensor.modbus_bus_line_a_timeouts"
-    assert component["value_template"] == "{{ value_json.buses['line-A'].timeouts }}"
+    assert (
+        component["value_template"]
+        == "{{ value_json.get('buses', {}).get('line-A', {}).get('timeouts') }}"
+    )
 
 
 def test_bridge_health_sensors_in_entity_mode() -> None:
