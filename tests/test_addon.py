@@ -1,5 +1,5 @@
 """The Home Assistant add-on (homeassistant-addon/): its files against the Supervisor's
-rules (tests/addon_rules.py), and its start script against a fake Supervisor HTTP API, a
+own rules (its code at a pinned release: tests/supervisor_rules.py), and its start script against a fake Supervisor HTTP API, a
 real Mosquitto with a password and the simulator: the broker and credentials come from
 the Supervisor's answer to ``GET /services/mqtt``, the buses and devices from the options,
 and the bridge it starts publishes discovery and state.
@@ -30,10 +30,16 @@ from bridge import __version__
 from bridge.config import MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_names
 from bridge.mqtt import MqttClient
-from tests.addon_rules import option_problems, problems
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.harness import eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker, free_port
+from tests.supervisor_rules import (
+    SupervisorMissingError,
+    config_problems,
+    load,
+    option_problems,
+    translation_problems,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 REPOSITORY = ROOT / "homeassistant-addon"
@@ -54,58 +60,94 @@ def addon_config() -> dict[str, Any]:
 # --- the files ------------------------------------------------------------------------------
 
 
+@pytest.fixture(scope="module")
+def supervisor() -> None:
+    """The Supervisor's rules are there (its source at the pinned commit), else skip."""
+    try:
+        load()
+    except SupervisorMissingError as missing:
+        pytest.skip(str(missing))
+
+
+@pytest.mark.usefixtures("supervisor")
 def test_config_follows_the_supervisor_rules() -> None:
-    assert problems(addon_config()) == []
+    """No error and no advisory (deprecated or legacy keys) from the Supervisor itself."""
+    assert config_problems(addon_config()) == []
 
 
-def test_the_rules_catch_what_the_supervisor_refuses() -> None:
-    """The checker is not a rubber stamp: each broken rule is named."""
-    config = addon_config()
-    broken = config | {
-        "arch": ["armv7", "amd64"],
+@pytest.mark.usefixtures("supervisor")
+def test_the_supervisor_refuses_what_the_old_hand_written_rules_let_through() -> None:
+    """The checker is the Supervisor, not a rubber stamp: each broken rule is named."""
+    broken = addon_config() | {
         "slug": "modbus bridge",
         "services": ["mqtt:needed"],
-        "map": ["config:rx"],
-        "uart": "yes",
-        "webgui": "http://[HOST]:[PORT:80]",
+        "map": ["addon_config:ro"],
+        "watchdog": "http://localhost:9464/health",
+        "image": "ghcr.io/modbus mqtt bridge",
+        "timeout": 5,
+        "startup": "sometimes",
     }
-    broken["schema"] = config["schema"] | {"level": "integer", "deep": [{"a": [{"b": "str"}]}]}
-    broken["options"] = config["options"] | {
-        "log_level": "loud",
-        "buses": [{"id": "RS 485", "transport": "modbus", "stopbits": 3}],
-    }
-    del broken["name"]
-    found = "\n".join(problems(broken))
+    found = "\n".join(config_problems(broken))
     for expected in (
-        "name: required",
-        "webgui: not an add-on config key",
-        "uart: str instead of",
-        "arch: armv7 is not supported",
-        "slug: letters, digits",
-        "services: 'mqtt:needed'",
-        "map: 'config:rx'",
-        "schema.level: unknown type 'integer'",
-        "schema.deep.a: lists and dicts nest at most two deep",
-        "options.level: required",
-        "options.log_level: 'loud' is not",
-        "options.buses.0.id: 'RS 485' is not",
-        "options.buses.0.transport: 'modbus' is not",
-        "options.buses.0.stopbits: 3 is not int(1,2)?",
+        "slug: does not match",
+        "services.0: does not match",
+        "watchdog: does not match",
+        "image: Invalid Docker image",
+        "timeout: value must be at least 10",
+        "startup: expected AppStartup",
+        "uses legacy map type 'addon_config'; use 'app_config' instead",
     ):
-        assert expected in found, expected
+        assert expected in found, (expected, found)
+    del broken["name"]
+    assert config_problems(broken) == [": Invalid app config!"]
+
+
+@pytest.mark.usefixtures("supervisor")
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        ({"log_level": "loud"}, "value must be one of ['debug', 'error', 'info', 'warning']"),
+        ({"buses": [{"id": "RS 485", "transport": "rtu"}]}, "does not match regular expression"),
+        ({"buses": [{"id": "rs485", "transport": "modbus"}]}, "value must be one of"),
+        (
+            {"buses": [{"id": "rs485", "transport": "rtu", "stopbits": 3}]},
+            "value must be at most 2",
+        ),
+        ({"mqtt_url": "not a url"}, "expected a URL"),
+        ({"level": "x"}, "Option 'level' does not exist in the schema"),
+    ],
+    ids=["enum", "match", "transport", "range", "url", "unknown"],
+)
+def test_the_supervisor_refuses_bad_options(change: dict[str, Any], expected: str) -> None:
+    config = addon_config()
+    found = "\n".join(option_problems(config["options"] | change, config["schema"]))
+    assert expected in found, found
+
+
+@pytest.mark.usefixtures("supervisor")
+def test_translations_follow_the_supervisor_rules() -> None:
+    assert translation_problems(_yaml(ADDON / "translations" / "en.yaml")) == []
 
 
 def test_config_declares_what_the_issue_asks() -> None:
     config = addon_config()
-    assert config["services"] == ["mqtt:need"]  # the broker comes from the Supervisor
-    assert config["uart"] is True and config["usb"] is True  # serial adapters
+    # the broker comes from the Supervisor if one is there, else from mqtt_url
+    assert config["services"] == ["mqtt:want"]
+    assert config["uart"] is True and "usb" not in config  # serial adapters, no raw USB
     assert sorted(config["arch"]) == ["aarch64", "amd64"]
     assert config["slug"] == ADDON.name
-    assert "addon_config:ro" in config["map"] and "share:ro" in config["map"]
+    assert config["map"] == ["app_config:ro", "share:ro"]
+    assert "apparmor" not in config  # on by default, with the profile below
+    assert (ADDON / "apparmor.txt").read_text(encoding="utf-8").count(
+        f"profile {config['slug']} flags="
+    ) == 1
     schema = config["schema"]
-    assert set(schema) == {"buses", "devices", "config_file", "base_topic",
-                           "discovery_prefix", "log_level"}  # fmt: skip
-    assert not any(key.startswith("mqtt") for key in schema)  # nobody types a broker
+    assert set(schema) == {"buses", "devices", "config_file", "mqtt_url", "mqtt_username",
+                           "mqtt_password", "base_topic", "discovery_prefix", "log_level"}  # fmt: skip
+    assert (schema["mqtt_url"], schema["mqtt_username"], schema["mqtt_password"]) == (
+        "url?", "str?", "password?"
+    )  # fmt: skip
+    assert not any(key.startswith("mqtt") for key in config["options"])  # Home Assistant's
 
 
 def test_version_is_the_package_version_everywhere() -> None:
@@ -113,9 +155,11 @@ def test_version_is_the_package_version_everywhere() -> None:
     version = project["project"]["version"]
     assert addon_config()["version"] == version == __version__
     dockerfile = (ADDON / "Dockerfile").read_text(encoding="utf-8")
-    [image] = re.findall(r"^ARG BRIDGE_IMAGE=(\S+)$", dockerfile, re.MULTILINE)
-    assert image == f"ghcr.io/modbus-mqtt-bridge/modbus-mqtt-bridge:{version}"
-    assert re.search(r"^FROM \$\{BRIDGE_IMAGE\}$", dockerfile, re.MULTILINE)
+    # the Supervisor passes config.yaml's version as BUILD_VERSION: the image of that tag
+    assert re.findall(r"^(ARG|FROM) (.+)$", dockerfile, re.MULTILINE) == [
+        ("ARG", "BUILD_VERSION"),
+        ("FROM", "ghcr.io/modbus-mqtt-bridge/modbus-mqtt-bridge:${BUILD_VERSION}"),
+    ]
     assert f"## {version}" in (ADDON / "CHANGELOG.md").read_text(encoding="utf-8")
     # BUILD_FROM is what older Supervisors fill with their own Alpine base: not used
     assert "BUILD_FROM" not in re.sub(r"#.*", "", dockerfile)
@@ -174,10 +218,11 @@ def test_repository_and_store_files() -> None:
         assert (width, height) == size, name
 
 
+@pytest.mark.usefixtures("supervisor")
 def test_default_options_and_docs_examples_fit_the_schema() -> None:
     config = addon_config()
     docs = re.findall(r"```yaml\n(.*?)```", (ADDON / "DOCS.md").read_text(encoding="utf-8"), re.S)
-    assert len(docs) == 3
+    assert len(docs) == 4
     for options in [config["options"], *(yaml.safe_load(block) for block in docs)]:
         assert option_problems(options, config["schema"]) == [], options
 
@@ -404,23 +449,33 @@ def pump_options(port: int = 5020) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def own_broker_options(broker: Broker) -> dict[str, Any]:
+    return {"mqtt_url": broker.url, "mqtt_username": BROKER_USER,
+            "mqtt_password": BROKER_PASSWORD}  # fmt: skip
+
+
 @pytest.mark.asyncio
+@pytest.mark.parametrize("own", [False, True], ids=["supervisor", "mqtt_url"])
 async def test_the_addon_starts_the_bridge_on_the_supervisors_broker(
-    mosquitto_auth: Broker, addon_dirs: dict[str, Path]
+    mosquitto_auth: Broker, addon_dirs: dict[str, Path], own: bool
 ) -> None:
     """No broker address anywhere in the options: the bridge logs in to the broker the
-    Supervisor names, with its user and password, and publishes the pump."""
+    Supervisor names, with its user and password, and publishes the pump. With mqtt_url
+    (and its user and password) in the options, that broker is used and the Supervisor,
+    which has none to give here, is not asked."""
     sim = simulator((1, "nastec_vasco"))
     observer_config = MqttConfig(url=mosquitto_auth.url, username=BROKER_USER,
                                  password=BROKER_PASSWORD)  # type: ignore[arg-type]  # fmt: skip
-    with FakeSupervisor(mqtt_answer(mosquitto_auth)) as supervisor:
+    answer = NO_BROKER if own else mqtt_answer(mosquitto_auth)
+    extra = own_broker_options(mosquitto_auth) if own else {}
+    with FakeSupervisor(answer) as supervisor:
         async with (
             serving_tcp(sim) as port,
             MqttClient(observer_config, will_topic="observer/state") as observer,
         ):
             seen: dict[str, bytes] = {}
             await observer.subscribe("homeassistant/device/pump/config", "modbus/pump/availability")
-            process = start_script(addon_dirs, pump_options(port), supervisor)
+            process = start_script(addon_dirs, pump_options(port) | extra, supervisor)
             try:
 
                 async def collect() -> None:
@@ -440,8 +495,9 @@ async def test_the_addon_starts_the_bridge_on_the_supervisors_broker(
                 process.send_signal(signal.SIGTERM)
                 code, out, err = finished(process)
     assert code == 0, err
-    assert f"broker mqtt://127.0.0.1:{mosquitto_auth.port} (from the Supervisor)" in out
-    assert supervisor.requests == [("/services/mqtt", f"Bearer {TOKEN}")]
+    source = "the add-on's options" if own else "the Supervisor"
+    assert f"broker mqtt://127.0.0.1:{mosquitto_auth.port} (from {source})" in out
+    assert supervisor.requests == ([] if own else [("/services/mqtt", f"Bearer {TOKEN}")])
     assert json.loads(seen["homeassistant/device/pump/config"])["device"]["name"] == "Borehole pump"
     written = (addon_dirs["tmp"] / "bridge.yaml").read_text(encoding="utf-8")
     assert BROKER_PASSWORD not in written  # handed over in the environment only
@@ -453,7 +509,33 @@ def test_no_broker_in_home_assistant_says_what_to_install(addon_dirs: dict[str, 
         code, _, err = finished(start_script(addon_dirs, pump_options(), supervisor))
     assert code == 1
     assert "no MQTT broker in Home Assistant (Service not enabled)" in err
-    assert "Mosquitto broker add-on" in err
+    assert "Mosquitto broker app" in err and "mqtt_url" in err
+
+
+def test_a_broker_login_without_its_address_is_refused(addon_dirs: dict[str, Path]) -> None:
+    """mqtt_username or mqtt_password alone: which broker would they log in to? Said, and
+    the Supervisor's broker is not used with a login meant for another."""
+    options = pump_options() | {"mqtt_username": "modbus"}
+    with FakeSupervisor(A_BROKER) as supervisor:
+        code, out, err = finished(start_script(addon_dirs, options, supervisor))
+    assert code == 2
+    assert one_line_error(err) == (
+        "error: mqtt_username and mqtt_password go with mqtt_url (the broker they log in "
+        "to); without mqtt_url the broker and its login are Home Assistant's\n"
+    )
+    assert supervisor.requests == [] and "broker" not in out
+
+
+def test_an_own_broker_over_tls_is_verified(run_module: ModuleType) -> None:
+    """mqtts:// from the options: TLS with the certificate checked (no 'insecure', which
+    only the Supervisor's internal broker name needs)."""
+    broker = run_module.own_broker({"mqtt_url": "mqtts://nas.local:8883", "mqtt_password": "x"})
+    section = run_module.mqtt_section(broker, {"tls": {"insecure": True}, "qos": 0})
+    assert section == {
+        "qos": 0,
+        "url": "mqtts://nas.local:8883",
+        "password_env": run_module.PASSWORD_ENV,
+    }
 
 
 def test_a_wrong_token_is_a_refusal_not_a_retry(addon_dirs: dict[str, Path]) -> None:

@@ -1,10 +1,12 @@
 """Start of the Home Assistant add-on: the broker from the Supervisor, the rest from the
 add-on's options, then ``modbus-mqtt-bridge run``.
 
-1. Ask the Supervisor for the MQTT service (``GET http://supervisor/services/mqtt`` with
-   ``SUPERVISOR_TOKEN``): host, port, user name and password of the broker add-on. No user
-   types a broker address; the password goes to the bridge in an environment variable,
-   never into a file.
+1. The broker: the ``mqtt_url`` option (with ``mqtt_username`` and ``mqtt_password``)
+   when given, for a broker that no add-on provides (a NAS, another broker add-on); else
+   ask the Supervisor for the MQTT service (``GET http://supervisor/services/mqtt`` with
+   ``SUPERVISOR_TOKEN``): host, port, user name and password of the broker add-on, so no
+   user types a broker address. The password goes to the bridge in an environment
+   variable, never into a file.
 2. Build the bridge config from ``/data/options.json``: the buses and devices of the
    options, or a whole bridge config file named by ``config_file`` (relative to the
    add-on's folder, /config, or a full path under /config or /share; a path that leads
@@ -130,19 +132,38 @@ def _refusal(refused: urllib.error.HTTPError) -> str:
     if refused.code == 400:  # the Supervisor's answer while no add-on provides MQTT
         return (
             f"no MQTT broker in Home Assistant ({message or 'HTTP 400'}): install and start "
-            "the Mosquitto broker add-on (Settings > Add-ons > Add-on store), then start "
-            "this add-on again"
+            "the Mosquitto broker app (Settings > Apps > App store), or give your "
+            "broker's address in the mqtt_url option, then start this add-on again"
         )
     return f"the Supervisor refused the MQTT service: HTTP {refused.code} {message}".rstrip()
 
 
+def own_broker(options: dict[str, Any]) -> dict[str, Any] | None:
+    """The broker the options name (``mqtt_url``...), which wins over the Supervisor's;
+    None when they name none."""
+    url = options.get("mqtt_url")
+    if not url:
+        if options.get("mqtt_username") or options.get("mqtt_password"):
+            raise AddonError(
+                "mqtt_username and mqtt_password go with mqtt_url (the broker they log in "
+                "to); without mqtt_url the broker and its login are Home Assistant's"
+            )
+        return None
+    return {"url": str(url), "username": options.get("mqtt_username"),
+            "password": options.get("mqtt_password"), "source": "the add-on's options"}  # fmt: skip
+
+
 def mqtt_section(service: dict[str, Any], file_mqtt: dict[str, Any]) -> dict[str, Any]:
-    """The file's MQTT settings (topics, QoS...) with the Supervisor's broker."""
-    ssl = bool(service.get("ssl"))
+    """The file's MQTT settings (topics, QoS...) with the broker: the options' own
+    (``url`` given) or the Supervisor's (host, port, ssl)."""
     section = {k: v for k, v in file_mqtt.items() if k not in CONNECTION_KEYS}
-    section["url"] = f"{'mqtts' if ssl else 'mqtt'}://{service['host']}:{service['port']}"
-    if ssl:  # the broker's certificate names its public host, not the internal one
-        section["tls"] = {"insecure": True}
+    if service.get("url"):
+        section["url"] = service["url"]  # TLS verified as for any broker
+    else:
+        ssl = bool(service.get("ssl"))
+        section["url"] = f"{'mqtts' if ssl else 'mqtt'}://{service['host']}:{service['port']}"
+        if ssl:  # the broker's certificate names its public host, not the internal one
+            section["tls"] = {"insecure": True}
     if service.get("username"):
         section["username"] = service["username"]
     if service.get("password"):
@@ -226,7 +247,7 @@ def bridge_config(options: dict[str, Any], service: dict[str, Any]) -> tuple[dic
 def main() -> int:
     options = json.loads(OPTIONS.read_text(encoding="utf-8"))
     try:
-        service = mqtt_service()
+        service = own_broker(options) or mqtt_service()
         data, base = bridge_config(options, service)
         if service.get("password"):
             os.environ[PASSWORD_ENV] = str(service["password"])
@@ -242,7 +263,8 @@ def main() -> int:
     GENERATED.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     config = loaded.config
     print(
-        f"broker {config.mqtt.url} (from the Supervisor), {len(config.buses)} bus(es), "
+        f"broker {config.mqtt.url} (from {service.get('source', 'the Supervisor')}), "
+        f"{len(config.buses)} bus(es), "
         f"{len(config.devices)} device(s); config in {GENERATED}",
         flush=True,
     )
