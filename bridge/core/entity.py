@@ -113,6 +113,29 @@ class Presentation(BaseModel):
     mode: str | None = Field(None, pattern="^(auto|box|slider)$", description="number mode")
 
 
+class Simulation(BaseModel):
+    """How the simulator (``simulate``, ``demo``) shows an entity, where its device class
+    and unit do not say it (``bridge/core/simulation_range.py`` has the table): the range
+    a measurement moves in and its typical value, a counter's rate, or the entity whose
+    value it shows (a set value in use follows the set value)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    min: float | None = None
+    max: float | None = None
+    typical: float | None = None
+    per_hour: float | None = Field(None, ge=0, description="a counter's rise per running hour")
+    follows: str | None = Field(None, description="key of the entity whose value this shows")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Self:
+        low = self.min if self.min is not None else float("-inf")
+        high = self.max if self.max is not None else float("inf")
+        if low > high or not low <= (self.typical if self.typical is not None else low) <= high:
+            raise ValueError("needs min <= typical <= max")
+        return self
+
+
 class RawRange(BaseModel):
     """Inclusive range of raw values, for ``on_when``."""
 
@@ -226,6 +249,9 @@ class Entity(BaseModel):
     )
     variants: tuple[Variant, ...] = Field((), description="first matching variant applies")
     note: str | None = None
+    simulate: Simulation | None = Field(
+        None, description="the simulator's range, typical value or counter rate, or follows"
+    )
     ha: Presentation = Presentation()
 
     def with_variant(self, variant: Variant) -> Entity:

@@ -6,12 +6,15 @@
   address, whatever its access (a read-only measurement can be set this way);
 * ``build_rules(mapping, points, quirks)``: which reads and writes the device answers with
   an exception, and which;
-* ``build_movers(points, image)`` / ``advance(movers, image, rng)``: measurements that
-  wander inside their range and counters that count, deterministic for a seeded ``rng``.
+* ``build_movers(points, image)`` / ``advance(movers, image, rng, seconds)``: measurements
+  that wander inside their plausible range (``simulation_range``), counters that rise at
+  their plausible rate (energy by the simulated power) and values that follow another
+  (``simulate: {follows: KEY}``), deterministic for a seeded ``rng``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import random
 import re
@@ -34,12 +37,12 @@ from bridge.core.entity import Access, DataType, Table
 from bridge.core.mapping import Mapping, Point
 from bridge.core.protocol import Protocol
 from bridge.core.request import Write
+from bridge.core.simulation_range import COUNTER_CLASSES, energy_source, plausible
 from bridge.errors import ValueRejectedError
 
 Cell = tuple[Table, int]
 
-_COUNTER_CLASSES = ("total", "total_increasing")
-_COUNTER_START = 3000  # raw: "a few thousand"
+_COUNTER_CLASSES = COUNTER_CLASSES
 _SMALL_RAW = 100
 _FAULT_WORDS = ("fault", "alarm", "error", "trip", "fail")
 _TRUE_WORDS = ("ready", "normal")
@@ -53,7 +56,8 @@ _AS_REGISTER = {  # a read-write copy of an entity, without limits, writing wher
     "write_function": None,
     "write_address": None,
 }
-_TYPICAL = {  # a plausible reading per unit, used when it fits the entity's range
+_TYPICAL = {  # a setting's value per unit, used when it fits the entity's range (readings:
+    # simulation_range)
     "V": 230, "Hz": 50, "A": 12, "W": 1500, "kW": 15, "kvar": 4, "kVA": 16, "°C": 40,
     "%": 50, "rpm": 1480, "kPa": 350, "bar": 3, "s": 10, "min": 30, "h": 120, "Ω": 120,
 }  # fmt: skip
@@ -130,6 +134,12 @@ def initial_image(mapping: Mapping, points: AnyMapping[str, Point]) -> dict[Cell
     for _ in range(len(roles) + 1):  # limit chains settle in a few passes
         if not _respect_limits(points, image):
             break
+    for point in points.values():  # a set value in use shows the set value
+        followed = (
+            points.get(point.entity.simulate.follows or "") if point.entity.simulate else None
+        )
+        if followed is not None and point.entity.readable:
+            image |= _nearest_storable(point, decode(followed, image), image)
     return image
 
 
@@ -237,10 +247,9 @@ def number_range(point: Point) -> tuple[float, float]:
 
 def _plausible_number(point: Point, low: float, high: float) -> float:
     entity = point.entity
-    if entity.ha.state_class in _COUNTER_CLASSES:
-        return min(float(scale_value(entity, _COUNTER_START)), high)
-    if entity.ha.device_class == "power_factor":
-        return min(0.85 * (100 if entity.unit == "%" else 1), high)
+    found = plausible(point)
+    if found is not None:
+        return min(max(found.typical, low), high)
     typical = _TYPICAL.get(entity.unit or "")
     if typical is not None and low <= typical <= high:
         return typical
@@ -420,59 +429,112 @@ def read_limit_code(protocol: Protocol) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Mover:
-    """A read-only number that changes over time: a measurement or a counter."""
+    """A read-only number that changes over time: a measurement, a counter, or a value
+    that shows another (``follows``)."""
 
     point: Point
     low: float
     high: float
     step: int  # largest move per tick, in raw units
     counter: bool
+    per_hour: float = 0.0  # a counter's rise per hour (times the rate source's value)
+    rate_source: Point | None = None  # an energy counter's power
+    follows: Point | None = None
 
 
 def build_movers(points: AnyMapping[str, Point], image: Image) -> tuple[Mover, ...]:
-    """Measurements (state_class measurement) and counters (total, total_increasing)."""
+    """Measurements (state_class measurement), counters (total, total_increasing) and the
+    values that follow another."""
     sources = set(_limit_roles(points))
     movers: list[Mover] = []
     for key, point in points.items():
         entity = point.entity
         state = entity.ha.state_class
+        followed = points.get(entity.simulate.follows or "") if entity.simulate else None
+        if followed is not None and entity.readable and _owns_value(point, points):
+            movers.append(Mover(point, 0, 0, 0, counter=False, follows=followed))
+            continue
         if (
             entity.access is not Access.READ
             or entity.kind != "number"
             or entity.field_width is not None
             or point.sign is not None
             or key in sources
-            or state not in ("measurement", *_COUNTER_CLASSES)
+            or state not in ("measurement", "measurement_angle", *_COUNTER_CLASSES)
             or not _owns_value(point, points)
         ):
             continue
         value = decode(point, image)
         if not isinstance(value, int | float) or isinstance(value, bool):
             continue
-        low, high = number_range(point)
-        spread = max(abs(value) * 0.2, abs(entity.scale) * 10)
-        low, high = max(low, value - spread), min(high, value + spread)
-        step = max(1, round((high - low) / abs(entity.scale) / 20))
-        movers.append(Mover(point, low, high, step, state in _COUNTER_CLASSES))
+        movers.append(_mover(point, value, points))
     return tuple(movers)
 
 
-def advance(movers: tuple[Mover, ...], image: Image, rng: random.Random) -> dict[Cell, int]:
-    """One tick: the cells that change. Sentinels are skipped, ranges held."""
+def _mover(point: Point, value: float, points: AnyMapping[str, Point]) -> Mover:
+    entity = point.entity
+    low, high = number_range(point)
+    found = plausible(point)
+    if entity.ha.state_class in _COUNTER_CLASSES:
+        source = energy_source(point, points)
+        rate, factor = (source[0], source[1]) if source else (None, 1.0)
+        per_hour = factor if rate is not None else (found.per_hour if found else 1.0)
+        return Mover(point, low, high, 1, True, per_hour, rate)
+    if found is not None:
+        low, high = max(low, min(found.low, value)), min(high, max(found.high, value))
+    else:
+        spread = max(abs(value) * 0.2, abs(entity.scale) * 10)
+        low, high = max(low, value - spread), min(high, value + spread)
+    step = max(1, round((high - low) / abs(entity.scale) / 20))
+    return Mover(point, low, high, step, False)
+
+
+def advance(
+    movers: tuple[Mover, ...], image: Image, rng: random.Random, seconds: float = 1.0
+) -> dict[Cell, int]:
+    """One tick of ``seconds``: the cells that change. Sentinels are skipped, ranges held;
+    a counter rises by its rate, whole raw steps, the fraction by chance (never falls)."""
     changes: dict[Cell, int] = {}
     for mover in movers:
         value = decode(mover.point, image)
         if not isinstance(value, int | float) or isinstance(value, bool):
             continue
         scale = mover.point.entity.scale
-        if mover.counter:
-            target = value + scale
+        if mover.follows is not None:
+            target: Value = decode(mover.follows, {**image, **changes})
+        elif mover.counter:
+            steps = _rate(mover, image) * seconds / 3600 / abs(scale)
+            whole = int(steps)
+            target = value + (whole + (rng.random() < steps - whole)) * abs(scale)
         else:
             target = min(
                 max(value + rng.randint(-mover.step, mover.step) * scale, mover.low), mover.high
             )
+        if target == value or target is None:
+            continue
         try:
             changes |= words_for(mover.point, target, image)
         except ValueRejectedError:
             continue
     return changes
+
+
+def count_once(movers: tuple[Mover, ...], image: Image) -> dict[Cell, int]:
+    """Every counter one raw step up (``Quirks.count_on_read``)."""
+    changes: dict[Cell, int] = {}
+    for mover in movers:
+        value = decode(mover.point, image)
+        if mover.counter and isinstance(value, int | float) and not isinstance(value, bool):
+            with contextlib.suppress(ValueRejectedError):
+                changes |= words_for(mover.point, value + abs(mover.point.entity.scale), image)
+    return changes
+
+
+def _rate(mover: Mover, image: Image) -> float:
+    """A counter's rise per hour now: its rate, times its power source's reading."""
+    if mover.rate_source is None:
+        return mover.per_hour
+    power = decode(mover.rate_source, image)
+    if not isinstance(power, int | float) or isinstance(power, bool):
+        return 0.0
+    return max(float(power), 0.0) * mover.per_hour

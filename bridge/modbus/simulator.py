@@ -59,6 +59,7 @@ from bridge.core.simulation import (
     advance,
     build_movers,
     build_rules,
+    count_once,
     initial_image,
     stored_cells,
     words_for,
@@ -219,8 +220,7 @@ class _Device:
             or not address <= watched < address + count
         ):
             return
-        counters = tuple(m for m in self.movers if m.counter)
-        self.image |= advance(counters, self.image, random.Random(0))  # noqa: S311
+        self.image |= count_once(self.movers, self.image)
 
     def _locked(self, function_code: int, address: int, values: object) -> int | None:
         """``Quirks.password``: the exception a locked unit answers (its protocol's
@@ -433,6 +433,7 @@ class Simulator:
             while True:
                 await asyncio.sleep(self._tick)
                 for device in self._devices.values():
-                    device.image |= advance(device.moving(), device.image, self._rng)
+                    moving = device.moving()
+                    device.image |= advance(moving, device.image, self._rng, self._tick)
         finally:
             self._moving = False
