@@ -300,7 +300,7 @@ class DevicePoller:
     ) -> tuple[int, ...]:
         if retries is None:  # reads are not resent: the next cycle reads again
             retries = 0
-        started = time.monotonic()
+        answer: list[float] = []  # the device's time per frame, not the wait before it
         try:
             values = await self.scheduler.submit(
                 self.device.unit,
@@ -310,6 +310,7 @@ class DevicePoller:
                 retries=retries,
                 protocol=self.protocol,
                 deadline=deadline,
+                answered=answer.append,
             )
         except DeviceTimeoutError:
             self._record(Outcome.TIMEOUT)
@@ -325,7 +326,7 @@ class DevicePoller:
             }.get(exc.action, Outcome.REFUSED)
             self._record(outcome, code=exc.code)
             raise
-        self._record(Outcome.OK, latency=time.monotonic() - started)
+        self._record(Outcome.OK, latency=sum(answer))
         return values
 
     def _record(

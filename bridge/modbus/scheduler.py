@@ -36,6 +36,7 @@ import heapq
 import itertools
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -82,6 +83,7 @@ class _Job:
     future: asyncio.Future[tuple[int, ...]]
     deadline: float | None = None
     sent: bool = False  # a frame of it went out (a resend after the deadline is dropped)
+    answered: Callable[[float], None] | None = None  # told each frame's answer time
 
 
 _Entry = tuple[int, int, _Job]  # (priority, sequence, job): the heap's order
@@ -134,6 +136,7 @@ class BusScheduler:
         retries: int = 0,
         protocol: Protocol | None = None,
         deadline: float | None = None,
+        answered: Callable[[float], None] | None = None,
     ) -> tuple[int, ...]:
         """Queue one transaction and wait for its result (or its error).
 
@@ -141,7 +144,9 @@ class BusScheduler:
         between two requests; ``retries`` resends after a timeout or a transmission error
         (each frame of a sequence); a job still waiting at ``deadline`` (monotonic) fails
         with CommandExpiredError and is never sent. A sequence that fails after its first
-        frame raises PartialWriteError.
+        frame raises PartialWriteError. ``answered`` is told the seconds of each frame from
+        its sending to its answer (the device's own time: not the wait in the queue, the
+        gap or the unit's pacing).
         """
         future: asyncio.Future[tuple[int, ...]] = asyncio.get_running_loop().create_future()
         job = _Job(
@@ -154,6 +159,7 @@ class BusScheduler:
             protocol or Protocol(),
             future,
             deadline,
+            answered=answered,
         )
         self._push(job)
         return await future
@@ -390,6 +396,8 @@ class BusScheduler:
             raise
         finally:
             ended = time.monotonic()
+            if job.answered is not None:
+                job.answered(ended - started)
             self.counters.transactions += 1
             self.counters.busy_seconds += ended - started
             self._last_end = ended

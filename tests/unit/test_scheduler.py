@@ -226,3 +226,20 @@ async def test_a_job_still_waiting_at_its_deadline_is_never_sent() -> None:
         await late
     assert [unit for unit, _, _ in transport.calls] == [1]
     await stop(task)
+
+
+@pytest.mark.asyncio
+async def test_the_answer_time_is_the_devices_not_the_pacing_before_the_frame() -> None:
+    """The genset paces its requests 1 s apart: its latency (health p50/p95) is its own
+    answer time, measured from the frame sent, not the second its request waited."""
+    transport = ScriptedTransport()
+    scheduler, task = await started(transport)
+    paced = Protocol(min_request_interval=0.3)
+    answers: list[float] = []
+    await scheduler.submit(1, READ, timeout=1, protocol=paced, answered=answers.append)
+    queued = time.monotonic()
+    await scheduler.submit(1, READ, timeout=1, protocol=paced, answered=answers.append)
+    assert time.monotonic() - queued >= 0.25  # the second waited for the pacing
+    assert len(answers) == 2
+    assert answers[1] < 0.1  # but the device answered at once
+    await stop(task)
