@@ -53,9 +53,10 @@ RUN pip wheel --wheel-dir /wheels --only-binary=:all: --no-binary=modbus-mqtt-br
 # --- runtime --------------------------------------------------------------------------
 FROM ${PYTHON_IMAGE} AS runtime
 
-# The package version (pyproject.toml; a test keeps them equal) and the base image, as
-# built (docker build --build-arg PYTHON_IMAGE=...).
-ARG VERSION=0.1.0
+# The package version, passed by whoever builds (.ci/release image: --build-arg
+# VERSION=<bridge.__version__>, the one place it is written; empty otherwise), and the base
+# image, as built (docker build --build-arg PYTHON_IMAGE=...).
+ARG VERSION
 ARG PYTHON_IMAGE
 LABEL org.opencontainers.image.title="modbus-mqtt-bridge" \
       org.opencontainers.image.description="Modbus RTU/TCP field devices to MQTT and Home Assistant: typed entities, safe writes, decoded alarms." \

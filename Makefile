@@ -72,6 +72,20 @@ check: $(DEV)
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
+# The release steps of .github/workflows/release.yml, here, publishing nothing: the
+# versions, actionlint, sdist + wheel, the wheel in a fresh venv checking the examples, the
+# image (this machine's architecture without buildx), a local registry standing in for
+# ghcr.io, the add-on built from it exactly as the Supervisor builds it (.ci/release).
+# Docker: ../shared/tools/docker-local.sh starts an engine here.
+release-check:
+	.ci/release all
+
+# The tests on a real Docker engine (the image, compose, the add-on on a Supervisor-like
+# network); skipped, saying why, when no engine answers. .ci/run starts one first.
+DOCKER_TESTS ?= tests/test_docker.py tests/test_addon_docker.py
+test-docker: $(DEV)
+	$(BIN)/pytest -p no:xdist -p no:cacheprovider $(DOCKER_TESTS)
+
 # The five seed devices simulated, bridged to MQTT (a broker on 127.0.0.1:1883 if one
 # answers, else an embedded one) with a live table. Ctrl-C stops. ARGS="--mqtt-url ...".
 # A venv that `make test` set up already has everything; else runtime + demo extra only.

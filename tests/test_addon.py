@@ -8,6 +8,7 @@ and the bridge it starts publishes discovery and state.
 from __future__ import annotations
 
 import asyncio
+import importlib.metadata
 import importlib.util
 import json
 import os
@@ -17,7 +18,6 @@ import signal
 import subprocess
 import sys
 import threading
-import tomllib
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from types import ModuleType
@@ -151,8 +151,7 @@ def test_config_declares_what_the_issue_asks() -> None:
 
 
 def test_version_is_the_package_version_everywhere() -> None:
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    version = project["project"]["version"]
+    version = importlib.metadata.version("modbus-mqtt-bridge")  # from bridge/__init__.py
     assert addon_config()["version"] == version == __version__
     dockerfile = (ADDON / "Dockerfile").read_text(encoding="utf-8")
     # the Supervisor passes config.yaml's version as BUILD_VERSION: the image of that tag

@@ -26,7 +26,6 @@ from urllib.parse import urlsplit
 import pytest
 import yaml
 
-from bridge import __version__
 from bridge.cli import _parser
 from bridge.config import (
     LoadedConfig,
@@ -415,8 +414,13 @@ def test_dockerfile_labels_follow_the_build_args_and_the_package_version() -> No
     assert 'org.opencontainers.image.base.name="${PYTHON_IMAGE}"' in labels
     assert "PYTHON_IMAGE" in args and args["PYTHON_IMAGE"] is None  # the global default
     assert 'org.opencontainers.image.version="${VERSION}"' in labels
+    # no copy of the version here: the release passes bridge.__version__, its one place
+    assert "VERSION" in args and args["VERSION"] is None
+    release = (ROOT / ".ci" / "release").read_text(encoding="utf-8")
+    assert release.count('--build-arg "VERSION=$v"') == 2  # buildx and the classic builder
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    assert args["VERSION"] == project["project"]["version"] == __version__
+    assert project["project"]["dynamic"] == ["version"]
+    assert project["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "bridge.__version__"}
 
 
 def test_dockerfile_healthcheck_asks_the_bridge_whether_it_is_alive() -> None:

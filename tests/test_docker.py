@@ -70,7 +70,10 @@ def _engine_answers() -> bool:
 def image() -> str:
     if not _engine_answers():
         pytest.skip("no Docker engine answers (set DOCKER_HOST, or start dockerd)")
-    docker("build", "--network", "host", "-t", IMAGE, str(ROOT), timeout=BUILD_TIMEOUT)
+    docker(
+        "build", "--network", "host", "--build-arg", f"VERSION={__version__}", "-t", IMAGE,
+        str(ROOT), timeout=BUILD_TIMEOUT,
+    )  # fmt: skip
     return IMAGE
 
 
