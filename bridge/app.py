@@ -42,7 +42,7 @@ from bridge.core.discovery import (
     Publish,
 )
 from bridge.core.health_report import HealthReporter, Snapshot
-from bridge.core.instance import Instance, answering_instance, instance_of, taken_message
+from bridge.core.instance import Instance, instance_of, taken_message
 from bridge.core.management_request import response
 from bridge.core.state import compact, plain_payload, published, state_document
 from bridge.core.topics import Topics
@@ -58,22 +58,20 @@ from bridge.mqtt import (
     MqttClient,
     MqttError,
     MqttPublishError,
-    MqttRefusedError,
     run_with_reconnect,
 )
 from bridge.mqtt.client import STANDBY_RETRY
+from bridge.standby import check_alone
+from bridge.subscriptions import Subscriptions, Wanted
 from bridge.web import WebFeed, serve_web
 
 log = logging.getLogger(__name__)
-ONLINE = b"online"
 Outgoing = tuple[str, str, bool]  # topic, payload, retain
 OUTBOX = 200  # non-retained messages kept while the broker is away
 HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
 HA_REPUBLISH_GAP = 30.0  # seconds at least between two republishes Home Assistant asks for
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
 STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
-CHECK_SETTLE = 0.3  # seconds to wait for a retained bridge/state or bridge/info at connect
-PING_TIMEOUT = 2.0  # seconds for the bridge that bridge/state names to answer a health check
 
 
 class Bridge:
@@ -114,6 +112,7 @@ class Bridge:
         self._rival: Instance | None = None  # a bridge that came up beside this one
         self._info_due = False  # bridge/info again: another bridge overwrote it
         self._engine: asyncio.Task[None] | None = None
+        self.subscriptions = Subscriptions(self._wanted(), max(1, self.mqtt.qos))
         self.management = Management(
             loaded,
             self.engine,
@@ -142,10 +141,30 @@ class Bridge:
                     self._session,
                     on_state=self._mqtt_is,
                     first_connect_required=self.must_connect,
-                    before_online=self._alone,
+                    announce=False,  # the session says online after check_alone
                 ),
                 name="mqtt",
             )
+
+    def _wanted(self) -> list[Wanted]:
+        topics = self.topics
+        commands = (*topics.command_filters(), topics.bridge_requests)
+        return [
+            Wanted(
+                "commands",
+                commands,
+                "commands and requests do not reach the bridge",
+                live_only=True,
+                level=logging.ERROR,
+            ),
+            Wanted("home_assistant", (topics.ha_status,), "Home Assistant's restarts go unnoticed"),
+            Wanted(
+                "bridge_info",  # a bridge that comes up beside this one says so there
+                (topics.bridge_info,),
+                "a second bridge on this base topic goes unnoticed",
+                level=logging.DEBUG,
+            ),
+        ]
 
     def _mqtt_is(self, state: str) -> None:
         """Follow the MQTT side; a bridge that stands by does not poll (a device that takes
@@ -154,75 +173,32 @@ class Bridge:
         if state == "standby" and self._engine is not None:
             self._engine.cancel()  # a write in flight is finished first
             self._engine = None
-        elif state == "online" and self._engine is None and self._group is not None:
+
+    def _polling(self) -> None:
+        """The engine runs (again, after standing by)."""
+        if self._engine is None and self._group is not None:
             self._engine = self._group.create_task(self.engine.run(), name="engine")
 
-    async def _alone(self, client: MqttClient) -> None:
-        """Before this connection says ``online``: subscribe to the commands (one that
-        comes meanwhile waits for the session), then BaseTopicTakenError if another
-        bridge serves the base topic (bridge/core/instance.py): the connection closes
-        and what came is dropped, never run."""
-        topics = self.topics
-        commands = (*topics.command_filters(), topics.bridge_requests)
-        try:
-            await client.subscribe(*commands, qos=max(1, self.mqtt.qos), live_only=True)
-        except MqttRefusedError as exc:  # an ACL: publishing state still works
-            log.error("%s: commands will not work (filters: %s)", exc, ", ".join(commands))
-        found = await client.retained(topics.bridge_state, settle=CHECK_SETTLE, limit=1)
-        if found.get(topics.bridge_state) != ONLINE:
-            return
-        found = await client.retained(topics.bridge_info, settle=CHECK_SETTLE, limit=1)
-        other = instance_of(found.get(topics.bridge_info))
-        if other is not None and other.id == self.instance.id:
-            return  # this run's own, from before a reconnect
-        answered, named = await self._answer_of_the_other(client)
-        if answered:
-            taken = taken_message(self.mqtt.base_topic, named or other, STANDBY_RETRY)
-            raise BaseTopicTakenError(taken)
-        log.info(
-            "%s says online, but no bridge answers a health check there: taking it over",
-            topics.bridge_state,
-        )
-
-    async def _answer_of_the_other(self, client: MqttClient) -> tuple[bool, Instance | None]:
-        """Whether a bridge answers a health check on this base topic within PING_TIMEOUT
-        (this one does not listen for requests yet), and the instance it names."""
-        answers = self.topics.bridge_response("health_check")
-        transaction = f"instance-check-{self.instance.id}"
-        async with client.watching(answers) as following:
-            request = json.dumps({"transaction": transaction})
-            await client.publish(self.topics.bridge_request("health_check"), request)
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(PING_TIMEOUT):
-                    while True:
-                        answer = (await following()).payload
-                        if transaction.encode() in answer:
-                            return True, answering_instance(answer)
-        return False, None
-
     async def _session(self, client: MqttClient) -> None:
-        """One connection: subscribe, clean up, publish everything, then serve."""
-        topics = self.topics
+        """One connection: subscriptions asked for beside everything else (bridge/
+        subscriptions.py); once no other bridge serves the base topic (bridge/standby.py),
+        ``online``, then clean up, publish everything, and serve. A command that came
+        meanwhile waits in the connection's queue (or goes with it, standing by)."""
         client.farewell = functools.partial(self._farewell, client)
         if self.remove_on_stop:
             client.goodbye = b""
-        qos = max(1, self.mqtt.qos)  # the commands: subscribed before online (_alone)
-        try:
-            await client.subscribe(topics.ha_status, qos=qos)
-        except MqttRefusedError as exc:
-            log.warning(
-                "%s: Home Assistant's restarts go unnoticed (retained messages remain)", exc
-            )
-        try:  # a bridge that comes up beside this one says so there
-            await client.subscribe(topics.bridge_info, qos=qos)
-        except MqttRefusedError as exc:
-            log.debug("%s: a second bridge on this base topic goes unnoticed", exc)
         self._rival = None
-        await self._publish_info(client)
-        await self._publish_everything(client)  # values first: one burst, one round trip
-        await self.discovery.publish(client, clear_stale=True)
+        self.subscriptions.reset()
         try:
             async with asyncio.TaskGroup() as group:
+                for wanted in self.subscriptions.wanted:
+                    group.create_task(self.subscriptions.keep(client, wanted))
+                await check_alone(client, self.topics, self.instance)
+                await client.announce()
+                self._polling()
+                await self._publish_info(client)
+                await self._publish_everything(client)  # values first: one round trip
+                await self.discovery.publish(client, clear_stale=True)
                 group.create_task(self._publisher(client))
                 group.create_task(self._refresher(client))
                 group.create_task(self._home_assistant_returns(client))
@@ -286,6 +262,11 @@ class Bridge:
         while interval > 0:
             report = self._health.report(self.engine.snapshot())
             counters = self.dispatcher.counters
+            report["mqtt"] = {
+                "state": self.mqtt_state,
+                "broker": client.broker,
+                "subscriptions": dict(self.subscriptions.states),
+            }
             report["messages"] = {
                 "commands": counters.commands,
                 "refused": counters.refused,

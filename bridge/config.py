@@ -61,6 +61,18 @@ def _from_config_folder(path: Path, info: ValidationInfo) -> Path:
     return path if base is None or path.is_absolute() else base / path
 
 
+def _without_credentials(url: str) -> tuple[str, str | None, str | None]:
+    """The URL without ``user:password@``, and the user and password it gave (decoded)."""
+    parts = urlsplit(url)
+    user, password, port = parts.username, parts.password, parts.port
+    if user is None:
+        return url, None, None
+    host = parts.hostname or ""
+    netloc = (f"[{host}]" if ":" in host else host) + (f":{port}" if port else "")
+    decoded = unquote(password) if password is not None else None
+    return parts._replace(netloc=netloc).geturl(), unquote(user), decoded
+
+
 def _one_source(name: str, *given: object) -> None:
     """At most one of ``<name>``, ``<name>_file``, ``<name>_env`` is given."""
     if sum(value is not None for value in given) > 1:
@@ -69,6 +81,9 @@ def _one_source(name: str, *given: object) -> None:
 
 FilePath = Annotated[Path, AfterValidator(_from_config_folder)]
 """A file a config names (a secret, a certificate); relative to the config file."""
+
+
+MAX_BROKERS = 16  # broker URLs in mqtt.url
 
 
 class TlsConfig(_Strict):
@@ -81,7 +96,11 @@ class TlsConfig(_Strict):
 
 
 class MqttConfig(_Strict):
-    url: str = "mqtt://127.0.0.1:1883"
+    url: str | list[str] = "mqtt://127.0.0.1:1883"
+    url_order: Literal["in_order", "random"] = Field(
+        "in_order",
+        description="with several broker URLs: the next one after a failure, or a random one",
+    )
     base_topic: str = "modbus"
     discovery_prefix: str = "homeassistant"
     discovery: Literal["device", "entity", "off"] = Field(
@@ -114,15 +133,20 @@ class MqttConfig(_Strict):
         """``mqtt://user:pass@host`` logs in as user with pass; the URL keeps only the
         host, so no log line, error or ``bridge/info`` ever shows the password."""
         url = data.get("url") if isinstance(data, dict) else None
-        if not isinstance(url, str) or "@" not in url:
+        urls: list[Any] = url if isinstance(url, list) else [url]
+        texts = [u for u in urls if isinstance(u, str)]
+        if len(texts) != len(urls) or not any("@" in u for u in texts):
             return data
         try:
-            parts = urlsplit(url)
-            user, password, port = parts.username, parts.password, parts.port
+            found = [_without_credentials(u) for u in texts]
         except ValueError:
             return data  # _check_url names the problem
-        if user is None:
+        logins = {(user, password) for _, user, password in found if user is not None}
+        if not logins:
             return data
+        if len(logins) > 1 or any(user is None for _, user, _ in found):
+            raise ValueError("url: the brokers of a list take the same user and password")
+        ((user, password),) = logins
         if data.get("username") is not None or (
             password is not None
             and any(data.get(k) is not None for k in ("password", "password_file", "password_env"))
@@ -130,19 +154,25 @@ class MqttConfig(_Strict):
             raise ValueError(
                 "url: give the user and password in the URL or in their fields, not both"
             )
-        host = parts.hostname or ""
-        netloc = (f"[{host}]" if ":" in host else host) + (f":{port}" if port else "")
-        moved = {**data, "url": parts._replace(netloc=netloc).geturl(), "username": unquote(user)}
+        bare = [u for u, _, _ in found]
+        moved = {**data, "url": bare if isinstance(url, list) else bare[0], "username": user}
         if password is not None:
-            moved["password"] = unquote(password)
+            moved["password"] = password
         return moved
 
     @field_validator("url")
     @classmethod
-    def _check_url(cls, url: str) -> str:
-        parts = urlsplit(url)
-        if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
-            raise ValueError("use mqtt://host[:port] or mqtts://host[:port]")
+    def _check_url(cls, url: str | list[str]) -> str | list[str]:
+        urls = url if isinstance(url, list) else [url]
+        if not 1 <= len(urls) <= MAX_BROKERS:
+            raise ValueError(f"give 1 to {MAX_BROKERS} broker URLs")
+        for each in urls:
+            parts = urlsplit(each)
+            if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
+                which = f"{each!r}: " if isinstance(url, list) else ""
+                raise ValueError(f"{which}use mqtt://host[:port] or mqtts://host[:port]")
+        if len({urlsplit(u).scheme for u in urls}) > 1:
+            raise ValueError("the brokers of a list all use mqtt:// or all mqtts://")
         return url
 
     @field_validator("base_topic", "discovery_prefix")
@@ -179,7 +209,7 @@ class MqttConfig(_Strict):
 
     @model_validator(mode="after")
     def _tls_needs_mqtts(self) -> Self:
-        if self.tls is not None and urlsplit(self.url).scheme != "mqtts":
+        if self.tls is not None and urlsplit(self.broker_url).scheme != "mqtts":
             raise ValueError("tls: settings apply to mqtts:// URLs; use mqtts://host[:port]")
         return self
 
@@ -189,12 +219,23 @@ class MqttConfig(_Strict):
         return self
 
     @property
+    def urls(self) -> list[str]:
+        """Every broker, in the configured order (one unless ``url`` is a list)."""
+        return list(self.url) if isinstance(self.url, list) else [self.url]
+
+    @property
+    def broker_url(self) -> str:
+        """The broker of this connection: the first (the MQTT client connects to a copy
+        of the config that names only the node it tries)."""
+        return self.urls[0]
+
+    @property
     def host(self) -> str:
-        return urlsplit(self.url).hostname or "127.0.0.1"
+        return urlsplit(self.broker_url).hostname or "127.0.0.1"
 
     @property
     def port(self) -> int:
-        parts = urlsplit(self.url)
+        parts = urlsplit(self.broker_url)
         return parts.port or (8883 if parts.scheme == "mqtts" else 1883)
 
     def password_value(self) -> str | None:

@@ -36,7 +36,8 @@ NOTES: dict[str, str] = {
     "Config.buses": "the serial lines and TCP gateways the bridge owns",
     "Config.devices": "the Modbus devices, each on one bus with one mapping",
     "MqttConfig.url": "broker: `mqtt://[user[:password]@]host[:port]` or `mqtts://...` (TLS); "
-    "a user and password in the URL log in and are never shown",
+    "a user and password in the URL log in and are never shown; a list of URLs: the nodes of a "
+    "cluster, the next one tried after a failure (docs/brokers.md)",
     "MqttConfig.base_topic": "first level of every topic: `<base>/<device>/...`",
     "MqttConfig.discovery_prefix": "Home Assistant's discovery prefix",
     "MqttConfig.client_id": "MQTT client id (default: generated)",
@@ -276,6 +277,8 @@ def _render_section(
 def _type_of(prop: Schema, root: Schema, is_duration: bool) -> str:
     """A short, readable type: ``integer (1..255)``, `` `rtu` | `ascii` ``, a link."""
     choices = [p for p in prop.get("anyOf", [prop]) if p.get("type") != "null"]
+    if len(choices) > 1:  # a value or a list of them (mqtt.url)
+        return " or ".join(_type_of(c, root, is_duration=False) for c in choices)
     if len(choices) == 1:
         prop = {**prop, **choices[0]}
     if is_duration:

@@ -87,7 +87,7 @@ def test_mappings_show_option_and_bad_option(capsys: pytest.CaptureFixture[str])
 def test_mappings_validate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     good = ROOT / "mappings" / "soft_starter.yaml"
     bad = tmp_path / "bad.yaml"
-    bad.write_text(good.read_text().replace("manufacturer:", "manufactuer:", 1))
+    bad.write_text(good.read_text().replace("\nmanufacturer:", "\nmanufactuer:", 1))
     assert main(["mappings", "validate", str(good)]) == 0
     assert "soft_starter.yaml: ok" in capsys.readouterr().out
     assert main(["mappings", "validate", str(good), str(bad)]) == 2

@@ -12,6 +12,7 @@ login (a wrong password does not get better by asking five times a second).
 
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass
 
 
@@ -45,3 +46,44 @@ class ReconnectBackoff:
         longest = self.fast_max if young else self.slow_max
         self._delay = min(longest, self.initial if self._delay == 0 else 2 * self._delay)
         return self._delay
+
+
+class BrokerUrls:
+    """Which broker of a cluster to try next (``mqtt.url`` as a list).
+
+    The bridge stays on the node it is connected to; after a failed connect or a lost
+    session the next attempt goes to the next node (in the configured order, or a random
+    one not tried yet), at once while some node is untried since the last connect, and
+    after the backoff once every node failed. A node that died costs one reconnect.
+    """
+
+    def __init__(self, urls: list[str], *, shuffled: bool = False, seed: int | None = None) -> None:
+        self.urls = list(urls)
+        self._random = random.Random(seed) if shuffled else None  # noqa: S311 - spreading load, not secrets
+        self._index = self._random.randrange(len(self.urls)) if self._random else 0
+        self._tried: set[int] = set()
+
+    @property
+    def current(self) -> str:
+        return self.urls[self._index]
+
+    def connected(self) -> None:
+        self._tried.clear()
+
+    def failed(self) -> bool:
+        """The current node failed: move on to the next. True when every node failed
+        since the last connect (wait as the backoff says), False when the next one is
+        untried (try it at once)."""
+        count = len(self.urls)
+        self._tried.add(self._index)
+        every = len(self._tried) >= count
+        if every:
+            self._tried.clear()
+        others = [i for i in range(count) if i not in self._tried and i != self._index]
+        if not others:
+            return every  # one node: stay on it
+        if self._random is not None:
+            self._index = self._random.choice(others)
+        else:
+            self._index = min(others, key=lambda i: (i - self._index) % count)
+        return every

@@ -8,6 +8,7 @@ from bridge.mqtt.errors import (
     MqttError,
     MqttPublishError,
     MqttRefusedError,
+    MqttUnackedError,
     MqttUnansweredError,
 )
 
@@ -20,6 +21,7 @@ __all__ = [
     "MqttError",
     "MqttPublishError",
     "MqttRefusedError",
+    "MqttUnackedError",
     "MqttUnansweredError",
     "run_with_reconnect",
 ]

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import math
 import socket
@@ -57,13 +58,14 @@ from paho.mqtt.reasoncodes import ReasonCode
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from bridge.config import MqttConfig, TlsConfig
-from bridge.core.backoff import ReconnectBackoff
+from bridge.core.backoff import BrokerUrls, ReconnectBackoff
 from bridge.mqtt.errors import (
     BaseTopicTakenError,
     MqttConnectError,
     MqttDisconnectedError,
     MqttPublishError,
     MqttRefusedError,
+    MqttUnackedError,
     MqttUnansweredError,
 )
 
@@ -150,6 +152,20 @@ class _Connection(aiomqtt.Client):
             _log.log(level, "the broker refused a publish to %s: %s", topic, reason_code)
         super()._on_publish(client, userdata, mid, reason_code, properties)
 
+    def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, *args: Any) -> None:
+        """aiomqtt's, except that the SUBACK of a SUBSCRIBE given up on (no answer in time:
+        a cluster creating its consumers) is a DEBUG line, not an ERROR with a traceback."""
+        if mid not in self._pending_subscribes:
+            _log.debug("a late SUBACK (message %d): the subscription was asked again", mid)
+            return
+        super()._on_subscribe(client, userdata, mid, *args)
+
+    def _on_unsubscribe(self, client: paho.Client, userdata: Any, mid: int, *args: Any) -> None:
+        if mid not in self._pending_unsubscribes:
+            _log.debug("a late UNSUBACK (message %d)", mid)
+            return
+        super()._on_unsubscribe(client, userdata, mid, *args)
+
     def _on_message(self, _client: paho.Client, _userdata: Any, message: paho.MQTTMessage) -> None:
         received = _Received(message)
         watcher = self.watchers.get(received.topic.value)
@@ -217,10 +233,13 @@ class MqttClient:
         will_topic: str,
         client_id: str | None = None,
         version: str | None = None,
-        before_online: Callable[[MqttClient], Awaitable[None]] | None = None,
+        announce: bool = True,
+        on_announced: Callable[[str], None] | None = None,
     ) -> None:
         self._config = config
-        self._before_online = before_online  # may raise BaseTopicTakenError
+        self._announce = announce  # False: the caller says ``online`` (``announce()``)
+        self._on_announced = on_announced  # hears the protocol once ``online`` is out
+        self.announced = False
         self._version = version or config.version  # a known 3.1.1 broker: no MQTT 5 try
         self._will_topic = will_topic
         self._client_id = client_id if client_id is not None else config.client_id
@@ -232,6 +251,11 @@ class MqttClient:
         self.goodbye = OFFLINE  # the will topic's last message at a clean close
 
     @property
+    def broker(self) -> str:
+        """The URL of the broker this session is on."""
+        return self._config.broker_url
+
+    @property
     def protocol(self) -> str:
         """The MQTT version in use, ``"5"`` or ``"3.1.1"`` (after a fallback)."""
         if self._protocol is None:
@@ -239,7 +263,7 @@ class MqttClient:
         return self._protocol
 
     async def __aenter__(self) -> Self:
-        url = self._config.url
+        url = self._config.broker_url
         try:
             context = await asyncio.to_thread(_tls_context, self._config)
         except (OSError, ssl.SSLError) as exc:
@@ -258,22 +282,27 @@ class MqttClient:
         else:
             connection = await self._open(aiomqtt.ProtocolVersion.V311, context)
         self._connection = connection
-        if self._before_online is not None:
+        if self._announce:
             try:
-                await self._before_online(self)
-            except BaseException:
-                await self._leave_quietly(connection)
+                await self.announce()
+            except MqttDisconnectedError:
+                await self.__aexit__(None, None, None)
                 raise
+        return self
+
+    async def announce(self) -> None:
+        """``online`` on the will topic (retained): from now on a stop says goodbye."""
         try:
             await self.publish(self._will_topic, ONLINE, retain=True)
         except MqttDisconnectedError as exc:
-            await self.__aexit__(None, None, None)
             if self._config.qos == 2:  # the session's first QoS 2 publish
                 raise MqttDisconnectedError(
                     f"{exc}; if the broker does not do QoS 2 (NATS before 2.10), set mqtt.qos: 1"
                 ) from exc
             raise
-        return self
+        self.announced = True
+        if self._on_announced is not None:
+            self._on_announced(self.protocol)
 
     async def _open(
         self, protocol: aiomqtt.ProtocolVersion, context: ssl.SSLContext | None
@@ -283,7 +312,7 @@ class MqttClient:
             password = config.password_value()
         except OSError as exc:
             raise MqttConnectError(
-                f"{config.url}: cannot read the password: {exc.strerror}"
+                f"{config.broker_url}: cannot read the password: {exc.strerror}"
             ) from exc
         limits = None
         if protocol is aiomqtt.ProtocolVersion.V5:
@@ -309,13 +338,15 @@ class MqttClient:
             connection.abort()
             if isinstance(exc, _RefusedByBroker):
                 code = exc.rc if isinstance(exc.rc, int) or exc.rc is None else exc.rc.value
-                raise MqttConnectError(f"{config.url} refused the connection: {exc}", code) from exc
+                raise MqttConnectError(
+                    f"{config.broker_url} refused the connection: {exc}", code
+                ) from exc
             if isinstance(exc, aiomqtt.MqttError) and connection.reached:
                 raise MqttUnansweredError(
-                    f"{config.url} took the connection but did not answer the CONNECT: {exc}"
+                    f"{config.broker_url} took the connection but did not answer the CONNECT: {exc}"
                 ) from exc
             if isinstance(exc, aiomqtt.MqttError):
-                raise MqttConnectError(f"cannot connect to {config.url}: {exc}") from exc
+                raise MqttConnectError(f"cannot connect to {config.broker_url}: {exc}") from exc
             raise
         _send_at_once(connection)
         connection.wake_on_loss()
@@ -333,9 +364,12 @@ class MqttClient:
         self._filters.clear()
         if connection is None:
             return
-        if exc_type is not None and issubclass(exc_type, BaseTopicTakenError):
-            await self._leave_quietly(connection)  # the topic is another bridge's to keep
+        taken = exc_type is not None and issubclass(exc_type, BaseTopicTakenError)
+        if taken or not self.announced:  # the will topic is another bridge's, or not said
+            self.announced = False
+            await self._leave_quietly(connection)
             return
+        self.announced = False
         stopping = exc_type is None or issubclass(exc_type, asyncio.CancelledError)
         try:
             if stopping:
@@ -453,6 +487,11 @@ class MqttClient:
         try:
             codes = await connection.subscribe(topics)
         except aiomqtt.MqttError as exc:
+            if not connection.lost and "timed out" in str(exc):
+                raise MqttUnackedError(
+                    f"the broker did not acknowledge the subscription to {', '.join(filters)} "
+                    f"within {_TIMEOUT:g} s"
+                ) from None
             raise MqttDisconnectedError(f"subscribe to {', '.join(filters)}: {exc}") from exc
         _restore_lost_cancel()
         if not isinstance(codes, list | tuple) or len(codes) != len(filters):
@@ -473,7 +512,7 @@ class MqttClient:
                 received = await anext(iterator)
             except aiomqtt.MqttError as exc:
                 raise MqttDisconnectedError(
-                    f"connection to {self._config.url} lost: {exc}"
+                    f"connection to {self._config.broker_url} lost: {exc}"
                 ) from exc
             yield _message(received)
 
@@ -596,7 +635,7 @@ class _ClosingSSLSocket(ssl.SSLSocket):
 
 def _tls_context(config: MqttConfig) -> ssl.SSLContext | None:
     """The TLS context for mqtts:// (None for mqtt://); reads the CA and key files."""
-    if urlsplit(config.url).scheme != "mqtts":
+    if urlsplit(config.broker_url).scheme != "mqtts":
         return None
     tls = config.tls or TlsConfig()
     context = ssl.create_default_context(cafile=tls.ca)
@@ -617,7 +656,7 @@ async def run_with_reconnect(
     backoff: ReconnectBackoff | None = None,
     on_state: Callable[[str], None] | None = None,
     first_connect_required: bool = False,
-    before_online: Callable[[MqttClient], Awaitable[None]] | None = None,
+    announce: bool = True,
 ) -> None:
     """Run ``session`` on a connected client, reconnecting for as long as it takes.
 
@@ -631,71 +670,104 @@ async def run_with_reconnect(
     (broker and protocol); an outage is logged once when it starts (WARNING) and once
     when it ends. ``first_connect_required`` (the demo): a first connect that fails raises
     its MqttConnectError instead of retrying, so a wrong URL or login is said once, not
-    retried forever. ``before_online`` runs on each new connection before the will topic
-    says ``online``; when it (or the session) raises BaseTopicTakenError, the client
-    leaves without a word, ``on_state`` hears ``"standby"``, the error is logged once and
-    the loop looks again every ``STANDBY_RETRY`` seconds until the topic is free.
+    retried forever. ``announce=False``: the session says ``online`` itself
+    (``client.announce()``), after its checks; when it raises BaseTopicTakenError, the
+    client leaves without a word, ``on_state`` hears ``"standby"``, the error is logged
+    once and the loop looks again every ``STANDBY_RETRY`` seconds until the topic is free.
+    With several broker URLs (``mqtt.url`` as a list: cluster nodes) each new attempt after
+    a failed connect or a lost session goes to the next one (``mqtt.url_order``), so a dead
+    node costs one reconnect, not its downtime.
     """
-    backoff = backoff or ReconnectBackoff()
-    outage: str | None = None
-    version: str | None = None  # what the broker answered last time
-    ever_connected = False
-    standing_by = False
+    loop = _Reconnection(config, backoff or ReconnectBackoff(), on_state)
     while True:
-        connected = False
         taken: BaseException | None = None
+        url = loop.nodes.current
+        attempt = config.model_copy(update={"url": url})
         try:
             async with MqttClient(
-                config, will_topic=will_topic, version=version, before_online=before_online
+                attempt,
+                will_topic=will_topic,
+                version=loop.version,
+                announce=announce,
+                on_announced=functools.partial(loop.up, url),
             ) as client:
-                connected = ever_connected = True
-                version = client.protocol
-                backoff.connected(time.monotonic())
-                _log.info(
-                    "MQTT %s %s (MQTT %s)",
-                    "connected to" if outage is None else "reachable again:",
-                    config.url,
-                    client.protocol,
-                    extra={"event": "mqtt_up", "broker": config.url, "protocol": client.protocol},
-                )
-                outage = None
-                if standing_by:
-                    _log.warning("MQTT: base topic free again: this bridge takes over")
-                    standing_by = False
-                if on_state is not None:
-                    on_state("online")
+                loop.version = client.protocol
+                loop.connected = loop.ever_connected = True
                 await session(client)
             return
         except* BaseTopicTakenError as group:
             taken = group.exceptions[0]
         except* (MqttConnectError, MqttDisconnectedError) as group:
             failure = group.exceptions[0]
-            if first_connect_required and not ever_connected:
+            if first_connect_required and not loop.ever_connected:
                 raise failure from None
-            reason = str(failure)
-            refused = isinstance(failure, MqttConnectError) and failure.refused
         # a stop that arrived while the session came down may have been swallowed on the
         # way (Python 3.11's TaskGroup gives a child's error priority over the cancel): the
         # task still says it is being cancelled, so it stops instead of reconnecting
         _restore_lost_cancel()
-        if taken is not None:
-            _log.log(logging.DEBUG if standing_by else logging.ERROR, "%s", taken)
-            standing_by = True
-            if on_state is not None:
-                on_state("standby")
-            await asyncio.sleep(STANDBY_RETRY)
-            continue
-        if connected and on_state is not None:
-            on_state("offline")
-        delay = backoff.failed(time.monotonic(), refused=refused)
-        if outage is None:
+        await asyncio.sleep(loop.standby(taken) if taken is not None else loop.down(failure, url))
+
+
+class _Reconnection:
+    """What the reconnect loop remembers between attempts, and what it says."""
+
+    def __init__(
+        self,
+        config: MqttConfig,
+        backoff: ReconnectBackoff,
+        on_state: Callable[[str], None] | None,
+    ) -> None:
+        self.backoff = backoff
+        self.on_state = on_state or (lambda _: None)
+        self.nodes = BrokerUrls(config.urls, shuffled=config.url_order == "random")
+        self.version: str | None = None  # what the broker answered last time
+        self.outage: str | None = None
+        self.standing_by = False
+        self.connected = False  # this attempt's session started
+        self.ever_connected = False
+
+    def up(self, url: str, protocol: str) -> None:
+        """The session said online."""
+        self.backoff.connected(time.monotonic())
+        self.nodes.connected()
+        _log.info(
+            "MQTT %s %s (MQTT %s)",
+            "connected to" if self.outage is None else "reachable again:",
+            url,
+            protocol,
+            extra={"event": "mqtt_up", "broker": url, "protocol": protocol},
+        )
+        if self.standing_by:
+            _log.warning("MQTT: the base topic is free again: this bridge takes over")
+        self.outage, self.standing_by = None, False
+        self.on_state("online")
+
+    def standby(self, taken: BaseException) -> float:
+        """Another bridge serves the base topic: said once; seconds until the next look."""
+        _log.log(logging.DEBUG if self.standing_by else logging.ERROR, "%s", taken)
+        self.standing_by, self.connected = True, False
+        self.on_state("standby")
+        return STANDBY_RETRY
+
+    def down(self, failure: BaseException, url: str) -> float:
+        """A failed connect or a lost session: said once per outage; seconds to wait."""
+        reason = str(failure)
+        refused = isinstance(failure, MqttConnectError) and failure.refused
+        if self.connected:
+            self.on_state("offline")
+        self.connected = False
+        wait = self.nodes.failed()
+        delay = self.backoff.failed(time.monotonic(), refused=refused) if wait else 0.0
+        if self.outage is None:
             _log.warning(
                 "MQTT: %s; retrying every %.1f s or later",
                 reason,
                 delay,
-                extra={"event": "mqtt_down", "broker": config.url},
+                extra={"event": "mqtt_down", "broker": url},
             )
-            outage = reason
+            self.outage = reason
         else:
             _log.debug("MQTT still unavailable: %s", reason)
-        await asyncio.sleep(delay)
+        if not wait:
+            _log.info("MQTT: trying the next broker, %s", self.nodes.current)
+        return delay

@@ -15,7 +15,9 @@
         ├── MqttDisconnectedError   an established session was lost (socket closed, keepalive
         │                           expired, broker restarted) or an operation on it timed out
         ├── MqttRefusedError        the broker answered a SUBSCRIBE with a failure code (an
-        │                           ACL); the session itself is fine
+        │   │                       ACL); the session itself is fine
+        │   └── MqttUnackedError    ...or did not answer it in time (a cluster creating its
+        │                           consumers); the session itself is fine
         ├── BaseTopicTakenError     another bridge serves the same base topic: this one left
         │                           the broker without a word (no will) and stands by
         └── MqttPublishError        one message cannot be published (a topic MQTT does not
@@ -72,3 +74,7 @@ class MqttPublishError(MqttError):
 
 class BaseTopicTakenError(MqttError):
     """Another bridge serves this base topic; the message says which and what to do."""
+
+
+class MqttUnackedError(MqttRefusedError):
+    """The broker did not acknowledge a subscription in time; the session is fine."""

@@ -13,8 +13,8 @@ from tests.integration.mosquitto import Broker
 class Relay:
     """Client <-> relay <-> broker. ``delay``: the broker's answers reach the client that
     many seconds late; ``hold``: they never do (a broker that stops acknowledging);
-    ``hold_after``: the same after that many answers (2: the CONNACK and the PUBACK of the
-    will topic's ``online``, so the session waits for its first SUBACK);
+    ``hold_after``: the same after that many answers (2: the CONNACK and one SUBACK, so
+    the session waits for the others);
     ``cut()``: every connection closed at once (no await: the caller picks the moment) and
     new ones closed as soon as accepted, until ``mend()``."""
 

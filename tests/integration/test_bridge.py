@@ -148,7 +148,10 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
             assert config["origin"]["name"] == "modbus-mqtt-bridge"
             assert config["availability_mode"] == "all"
             for key, component in config["cmps"].items():
-                assert component["unique_id"].startswith(f"modbus_{name}_"), key
+                # the device's own entities, and its health sensors (their unique ids from
+                # when they sat on the bridge's device, kept so their history stays)
+                owners = (f"modbus_{name}_", f"modbus_bridge_device_{name}_")
+                assert component["unique_id"].startswith(owners), key
                 assert "object_id" not in component, key
                 assert component.get("state_topic", f"modbus/{name}") == f"modbus/{name}", key
             await eventually(  # units and limits read from registers land in discovery

@@ -153,7 +153,7 @@ REFUSED = {  # what is refused: what else is allowed, the level and words the br
     "commands": (
         allowed("subscribePattern", "homeassistant/#"),
         logging.ERROR,
-        "commands will not work",
+        "commands and requests do not reach the bridge",
     ),
     "discovery": (
         allowed("subscribeLiteral", *COMMANDS, HA_STATUS),

@@ -68,14 +68,17 @@ async def turns(count: int) -> None:
 async def stop_around_a_cut(
     relay: Relay, bridge: Bridge, phase: str, *, after: int = 0, ms: float = 0
 ) -> float:
-    """Run the bridge until ``phase`` (``start``: its session waits for the SUBACK of its
-    first subscription; ``serving``: publishes wait for their PUBACKs), then cut and cancel
+    """Run the bridge until ``phase`` (``start``: its session waits for SUBACKs, the
+    check of its base topic among them; ``serving``: publishes wait for their PUBACKs), then cut and cancel
     ``after`` turns (and ``ms`` milliseconds) apart (the cancel first when ``after`` < 0);
     seconds from the cancel to the end of run()."""
     relay.hold_after = 2 if phase == "start" else None
     task = asyncio.create_task(bridge.run())
     try:
-        await eventually(lambda: bridge.mqtt_state == "online", 10)
+        if phase == "start":  # the CONNACK and one SUBACK passed; the rest is held
+            await eventually(lambda: relay.hold, 10)
+        else:
+            await eventually(lambda: bridge.mqtt_state == "online", 10)
         if phase == "serving":
             await eventually(lambda: bool(bridge.engine.devices["pump"].values), 10)
             relay.hold = True  # acknowledgements never come: publishes stay in flight

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bridge.core.backoff import ReconnectBackoff
+from bridge.core.backoff import BrokerUrls, ReconnectBackoff
 
 
 def delays(backoff: ReconnectBackoff, times: list[float]) -> list[float]:
@@ -52,3 +52,58 @@ def test_a_refused_login_is_not_retried_five_times_a_second() -> None:
     times = [0.0, 0.1, 0.3, 0.7, 1.5, 3.1, 6.3]
     delays_refused = [backoff.failed(t, refused=True) for t in times]
     assert delays_refused == pytest.approx([0.1, 0.2, 0.4, 0.8, 1.6, 3.2, 6.4])
+
+
+# --- the next broker of a cluster (mqtt.url as a list) ----------------------------------
+
+
+NODES = ["mqtt://a:1883", "mqtt://b:1883", "mqtt://c:1883"]
+
+
+def test_one_broker_stays_and_waits_after_each_failure() -> None:
+    nodes = BrokerUrls(["mqtt://a:1883"])
+    assert [nodes.failed() for _ in range(3)] == [True, True, True]
+    assert nodes.current == "mqtt://a:1883"
+
+
+def test_a_dead_node_costs_one_reconnect_then_the_round_waits() -> None:
+    nodes = BrokerUrls(NODES)
+    assert nodes.current == NODES[0]
+    seen = []
+    for _ in range(7):
+        wait = nodes.failed()
+        seen.append((nodes.current[7], wait))
+    # b and c at once, then the backoff before a again; the rounds go on in order
+    assert seen == [
+        ("b", False),
+        ("c", False),
+        ("a", True),
+        ("b", False),
+        ("c", False),
+        ("a", True),
+        ("b", False),
+    ]
+
+
+def test_a_connect_starts_a_new_round_from_where_it_is() -> None:
+    nodes = BrokerUrls(NODES)
+    nodes.failed()  # a died: b
+    nodes.connected()
+    assert nodes.current == NODES[1]
+    assert nodes.failed() is False and nodes.current == NODES[2]
+    assert nodes.failed() is False and nodes.current == NODES[0]
+    assert nodes.failed() is True and nodes.current == NODES[1]
+
+
+def test_random_order_tries_every_node_once_a_round() -> None:
+    for seed in range(20):
+        nodes = BrokerUrls(NODES, shuffled=True, seed=seed)
+        first = nodes.current
+        tried = [first]
+        waits = []
+        for _ in range(3):
+            waits.append(nodes.failed())
+            tried.append(nodes.current)
+        assert set(tried[:3]) == set(NODES), seed  # a round visits each node
+        assert waits == [False, False, True], seed
+        assert tried[3] != tried[2]  # never the node that just failed

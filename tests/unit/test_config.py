@@ -272,6 +272,37 @@ def test_credentials_in_the_url_log_in_and_are_never_shown(tmp_path: Path) -> No
     assert (user_only.username, user_only.password_value()) == ("bridge@site", None)
 
 
+def test_a_broker_cluster_is_a_list_of_urls(tmp_path: Path) -> None:
+    nodes = "['mqtt://u:pw@n1:1883', 'mqtt://u:pw@n2', 'mqtt://u:pw@[::1]:1885']"
+    text = f"mqtt: {{url: {nodes}, url_order: random}}\n" + BASE
+    mqtt = load_config(write(tmp_path, text)).config.mqtt
+    assert mqtt.urls == ["mqtt://n1:1883", "mqtt://n2", "mqtt://[::1]:1885"]
+    assert (mqtt.username, mqtt.password_value(), mqtt.url_order) == ("u", "pw", "random")
+    assert (mqtt.broker_url, mqtt.host, mqtt.port) == ("mqtt://n1:1883", "n1", 1883)
+    assert "pw" not in str(mqtt.model_dump(mode="json"))
+
+
+@pytest.mark.parametrize(
+    ("url", "said"),
+    [
+        ("[]", "mqtt.url: give 1 to 16 broker URLs"),
+        ("['mqtt://a', 'http://b']", "mqtt.url: 'http://b': use mqtt://host[:port]"),
+        ("['mqtt://a', 'mqtts://b']", "mqtt.url: the brokers of a list all use"),
+        (
+            "['mqtt://u:p@a', 'mqtt://v:p@b']",
+            "mqtt: url: the brokers of a list take the same user and password",
+        ),
+        (
+            "['mqtt://u:p@a', 'mqtt://b']",
+            "mqtt: url: the brokers of a list take the same user and password",
+        ),
+    ],
+)
+def test_a_broker_list_is_checked(tmp_path: Path, url: str, said: str) -> None:
+    rows = issues(tmp_path, f"mqtt: {{url: {url}}}\n" + BASE)
+    assert len(rows) == 1 and rows[0].startswith(said), rows
+
+
 def test_topics_beyond_the_mqtt_limit_are_refused(tmp_path: Path) -> None:
     long_id = "d" * 65500  # homeassistant/binary_sensor/<id>/speed/config: 65541 bytes
     rows = issues(
