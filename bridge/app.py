@@ -146,6 +146,11 @@ class Bridge:
                 name="mqtt",
             )
 
+    @property
+    def mqtt_subscriptions(self) -> dict[str, str]:
+        """Which subscription groups the broker holds (live), waits on or refused."""
+        return dict(self.subscriptions.states)
+
     def _wanted(self) -> list[Wanted]:
         topics = self.topics
         commands = (*topics.command_filters(), topics.bridge_requests)
@@ -265,7 +270,7 @@ class Bridge:
             report["mqtt"] = {
                 "state": self.mqtt_state,
                 "broker": client.broker,
-                "subscriptions": dict(self.subscriptions.states),
+                "subscriptions": self.mqtt_subscriptions,
             }
             report["messages"] = {
                 "commands": counters.commands,

@@ -87,6 +87,8 @@ class BridgeState(Protocol):
     def feed(self) -> WebFeed: ...
     @property
     def mqtt_state(self) -> str: ...
+    @property
+    def mqtt_subscriptions(self) -> dict[str, str]: ...
 
 
 class WebApp:
@@ -192,6 +194,7 @@ class WebApp:
             report,
             version=__version__,
             mqtt=bridge.mqtt_state,
+            subscriptions=bridge.mqtt_subscriptions,
             raw_writes=bridge.loaded.config.bridge.allow_raw_writes,
             refused=bridge.feed.refused,
         )

@@ -2,7 +2,8 @@
 topics use: ``engine.snapshot()`` through ``build_health_report``, each poller's values
 through ``bridge.core.state``. Nothing here touches a bus or waits.
 
-    overview   {version, time, uptime_s, mqtt, raw_writes, refused, devices: [summary],
+    overview   {version, time, uptime_s, mqtt, subscriptions, raw_writes, refused,
+                devices: [summary],
                 buses: [{id, transport, connected, utilisation, requests_per_s, requests,
                          timeouts, frame_errors, exceptions, reopenings}]}
     summary    {id, name, model, mapping, bus, unit, state, status, alarms, last_success,
@@ -49,7 +50,8 @@ class BusWindow:
 def overview(
     pollers: Iterable[DevicePoller], report: dict[str, Any], **bridge: Any
 ) -> dict[str, Any]:
-    """The overview document: ``bridge`` fields (version, mqtt, raw_writes, refused) first."""
+    """The overview document: ``bridge`` fields (version, mqtt, subscriptions: group ->
+    live|pending|refused, raw_writes, refused) first."""
     return {
         **bridge,
         "time": report["timestamp"],

@@ -15,7 +15,8 @@ class Relay:
     many seconds late; ``hold``: they never do (a broker that stops acknowledging);
     ``hold_after``: the same after that many answers (2: the CONNACK and one SUBACK, so
     the session waits for the others);
-    ``cut()``: every connection closed at once (no await: the caller picks the moment) and
+    ``unanswered``: a topic filter whose first SUBSCRIBE the broker's SUBACK never answers
+    (a cluster that did not create its consumer in time); ``cut()``: every connection closed at once (no await: the caller picks the moment) and
     new ones closed as soon as accepted, until ``mend()``."""
 
     def __init__(self, broker: Broker) -> None:
@@ -23,6 +24,8 @@ class Relay:
         self.delay = 0.0
         self.hold = False
         self.hold_after: int | None = None
+        self.unanswered: bytes | None = None
+        self._dropping: set[bytes] = set()  # packet ids of SUBSCRIBEs left unanswered
         self.url = ""
         self._open = True
         self._writers: set[asyncio.StreamWriter] = set()
@@ -42,8 +45,16 @@ class Relay:
         up_reader, up_writer = await asyncio.open_connection(self.broker.host, self.broker.port)
         self._writers |= {writer, up_writer}
         down = asyncio.ensure_future(self._down(up_reader, writer))
+        pending = b""
         try:
             while chunk := await reader.read(65536):  # the client's packets: at once
+                if self.unanswered is not None:
+                    packets, pending = _split(pending + chunk)
+                    for packet in packets:
+                        wanted = self.unanswered
+                        if packet[0] == 0x82 and wanted is not None and wanted in packet:
+                            self._dropping.add(_packet_id(packet))
+                            self.unanswered = None  # the first one only
                 up_writer.write(chunk)
                 await up_writer.drain()
         except ConnectionError:
@@ -62,9 +73,13 @@ class Relay:
                 writer.write(chunk)
 
         passed = 0
+        pending = b""
         while chunk := await reader.read(65536):
             if self.hold:
                 continue
+            if self._dropping or pending:  # whole packets only, while one is looked for
+                packets, pending = _split(pending + chunk)
+                chunk = b"".join(p for p in packets if not self._unanswered(p))
             if self.delay:
                 loop.call_later(self.delay, write, chunk)
             else:
@@ -72,6 +87,41 @@ class Relay:
             passed += 1
             self.hold |= passed == self.hold_after
         writer.close()
+
+    def _unanswered(self, packet: bytes) -> bool:
+        """A SUBACK of a SUBSCRIBE left unanswered (dropped once)."""
+        if packet[0] != 0x90 or _packet_id(packet) not in self._dropping:
+            return False
+        self._dropping.discard(_packet_id(packet))
+        return True
+
+
+def _split(data: bytes) -> tuple[list[bytes], bytes]:
+    """Whole MQTT packets at the start of ``data``, and the rest."""
+    packets = []
+    while len(data) >= 2:
+        length, shift, at = 0, 0, 1
+        while at < len(data) and at < 5:
+            byte = data[at]
+            length |= (byte & 0x7F) << shift
+            shift, at = shift + 7, at + 1
+            if not byte & 0x80:
+                break
+        else:
+            break  # the length is not all there yet
+        if len(data) < at + length:
+            break
+        packets.append(data[: at + length])
+        data = data[at + length :]
+    return packets, data
+
+
+def _packet_id(packet: bytes) -> bytes:
+    """The packet identifier right after the fixed header (SUBSCRIBE, SUBACK)."""
+    at = 1
+    while packet[at] & 0x80:
+        at += 1
+    return packet[at + 1 : at + 3]
 
 
 @contextlib.asynccontextmanager

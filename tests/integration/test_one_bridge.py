@@ -28,6 +28,7 @@ from bridge.mqtt import MqttClient
 from bridge.mqtt import client as client_module
 from tests.integration.harness import cancel, eventually, serving_serial, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
+from tests.integration.proxy import relayed
 from tests.integration.test_bridge import observing
 
 PUMP = "nastec_vasco"
@@ -207,3 +208,55 @@ async def test_a_serial_port_is_opened_by_one_process_only() -> None:
         finally:
             first.close()
             second.close()
+
+
+@pytest.mark.asyncio
+@pytest.mark.timeout(60)
+async def test_an_unanswered_subscription_is_asked_again_and_state_goes_out_meanwhile(
+    mosquitto: Broker, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A cluster that does not answer a SUBSCRIBE in time (its consumer not created yet):
+    the session goes on, state and availability go out, the commands are asked for again
+    and work once held; bridge/health says which subscriptions hold."""
+    monkeypatch.setattr(client_module, "_TIMEOUT", 1.0)  # the SUBACK wait: 10 s in life
+    sim = simulator((1, PUMP))
+    watched = ("modbus/nastec_vasco/availability", "modbus/bridge/health")
+    async with (
+        serving_tcp(sim) as port,
+        relayed(mosquitto) as (relay, url),
+        observing(mosquitto, *watched) as observer,
+    ):
+        relay.unanswered = b"modbus/+/set"
+        bridge = Bridge(bridge_config_for_url(url, port))
+        with caplog.at_level(logging.INFO, logger="bridge"):
+            async with started(bridge):
+                await eventually(lambda: observer.retained.get(watched[0]) == b"online", 10)
+                assert bridge.subscriptions.states["commands"] == "pending"
+                await eventually(lambda: bridge.subscriptions.states["commands"] == "live", 10)
+                health = observer.json(watched[1])
+                assert set(health["mqtt"]["subscriptions"]) == {
+                    "commands",
+                    "home_assistant",
+                    "bridge_info",
+                }
+                before = pump_writes(sim)
+                await send(mosquitto, "modbus/nastec_vasco/set", '{"start_stop": true}')
+                await eventually(lambda: pump_writes(sim) == before + 1, 10)
+    said = [r for r in caplog.records if "did not acknowledge the subscription" in r.getMessage()]
+    assert [r.levelno for r in said] == [logging.WARNING]
+    assert "commands and requests do not reach the bridge" in said[0].getMessage()
+    assert any("subscribed to modbus/+/set" in r.getMessage() for r in caplog.records)
+    sessions = [r for r in caplog.records if r.getMessage().startswith("MQTT connected to")]
+    assert len(sessions) == 1  # one session throughout: the unanswered SUBACK did not end it
+
+
+def bridge_config_for_url(url: str, port: int) -> Any:
+    data = {
+        "mqtt": {"url": url, "base_topic": "modbus", "command_expiry": 3},
+        "bridge": {"health_interval": 0.5},
+        "buses": [
+            {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port, "timeout": 0.5}
+        ],
+        "devices": [{"id": PUMP, "bus": "tcp", "unit": 1, "mapping": PUMP, "poll": {"fast": 0.5}}],
+    }
+    return load_config_data(data, Path("site.yaml"))

@@ -53,6 +53,7 @@ async def test_overview_and_device_pages_show_what_the_bridge_knows(
     async with site(mosquitto, tmp_path) as s:
         overview = await both_online(s.port)
         assert overview["mqtt"] in ("online", "connecting")
+        assert set(overview["subscriptions"]) == {"commands", "home_assistant", "bridge_info"}
         assert overview["raw_writes"] is False
         pump = next(d for d in overview["devices"] if d["id"] == "pump")
         assert pump | {"last_success": None} == pump | {

@@ -111,8 +111,12 @@ function connect(deviceId) {
 function setLink(trouble) {
   const mqtt = page.overview ? page.overview.mqtt : "…";
   const live = trouble || (page.events && page.events.readyState === EventSource.OPEN ? "live" : "connecting");
-  $("#link").textContent = `MQTT ${mqtt} · page ${live}`;
-  $("#link").dataset.state = trouble ? "trouble" : mqtt;
+  // a subscription the broker does not hold (yet): commands cannot reach the bridge
+  const held = (page.overview && page.overview.subscriptions) || {};
+  const waiting = Object.keys(held).filter((name) => held[name] !== "live");
+  const note = mqtt === "online" && waiting.length ? ` (not subscribed: ${waiting.join(", ")})` : "";
+  $("#link").textContent = `MQTT ${mqtt}${note} · page ${live}`;
+  $("#link").dataset.state = trouble ? "trouble" : note ? "trouble" : mqtt;
 }
 
 // --- pages -----------------------------------------------------------------------------
