@@ -130,6 +130,7 @@ def build_device_discovery(
         limits=limits,
         readings=readings,
         device_name=device.name,
+        keys=frozenset([*device.mapping.entities, ALARMS_KEY]),
     )
     return {
         "device": {

@@ -65,6 +65,7 @@ class ComponentContext:
     limits: AnyMapping[str, Limits]
     readings: AnyMapping[str, Value] = field(default_factory=dict)
     device_name: str = ""
+    keys: frozenset[str] = frozenset()  # every key of the mapping (entity ids kept apart)
 
     @property
     def unique_prefix(self) -> str:
@@ -91,6 +92,20 @@ def shown_name(name: str, device_name: str) -> str:
         rest = name[len(prefix) :]
         return rest[:1].upper() + rest[1:]
     return name
+
+
+def object_id(key: str, context: ComponentContext) -> str:
+    """The entity id Home Assistant is asked for, after the platform: ``<device>_<key>``,
+    without a leading repeat of the device id in the key (key ``genset_status`` on the
+    device ``genset`` is ``sensor.genset_status``, not ``sensor.genset_genset_status``).
+    The repeat stays where the shorter id is another key's (``status`` beside it). Home
+    Assistant takes the id only when it first creates the entity: one already there keeps
+    its id and history, and the unique id is the key's in any case."""
+    device = slug(context.device_id)
+    rest = key.removeprefix(f"{device}_")
+    if not rest or rest == key or rest in context.keys:
+        return f"{device}_{key}"
+    return f"{device}_{rest}"
 
 
 def value_template(key: str) -> str:
@@ -123,7 +138,7 @@ def base_config(key: str, name: str, platform: Component, context: ComponentCont
     return {
         "platform": platform.value,
         "unique_id": f"{context.unique_prefix}_{key}",
-        "default_entity_id": f"{platform.value}.{slug(context.device_id)}_{key}",
+        "default_entity_id": f"{platform.value}.{object_id(key, context)}",
         "name": shown_name(name, context.device_name),
         "qos": QOS,
     }

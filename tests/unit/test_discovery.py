@@ -807,6 +807,34 @@ def test_an_entity_name_does_not_repeat_the_device_name(
     assert config["name"] == shown
 
 
+def test_an_entity_id_does_not_repeat_the_device_id() -> None:
+    """Key genset_status on the device genset asks for sensor.genset_status (its unique
+    id stays the key's: Home Assistant keeps an existing entity's id and history); the
+    repeat stays where the shorter id is another key's, and for a key that is only the
+    device id."""
+    entities = {
+        "genset_status": {"name": "Status", "address": 0},
+        "genset_mode": {"name": "Mode", "address": 1},
+        "mode": {"name": "Mode code", "address": 2},
+        "genset": {"name": "Genset", "address": 3},
+        "trip": {"name": "Trip", "address": 4, "bit": 0, "alarm": True},
+        "genset_alarms": {"name": "Alarm word", "address": 5},
+    }
+    cmps = _cmps(entities, id="genset", name="Standby genset")
+    ids = {key: (c["unique_id"], c["default_entity_id"]) for key, c in cmps.items()}
+    assert ids == {
+        "genset_status": ("modbus_genset_genset_status", "sensor.genset_status"),
+        "genset_mode": ("modbus_genset_genset_mode", "sensor.genset_genset_mode"),
+        "mode": ("modbus_genset_mode", "sensor.genset_mode"),
+        "genset": ("modbus_genset_genset", "sensor.genset_genset"),
+        "trip": ("modbus_genset_trip", "binary_sensor.genset_trip"),
+        "genset_alarms": ("modbus_genset_genset_alarms", "sensor.genset_genset_alarms"),
+        "alarms": ("modbus_genset_alarms", "sensor.genset_alarms"),
+    }
+    dashed = _cmps({"main_drive_speed": {"name": "Speed", "address": 0}}, id="main-drive")
+    assert dashed["main_drive_speed"]["default_entity_id"] == "sensor.main_drive_speed"
+
+
 def test_every_device_points_to_the_bridge() -> None:
     [bridge_message] = build_bridge_discovery(TOPICS, ORIGIN, "modbus_bridge")
     bridge_ids = json.loads(bridge_message.payload)["device"]["identifiers"]
