@@ -32,9 +32,7 @@ import yaml
 
 from bridge import __version__
 from bridge.core.mapping import builtin_mapping_names
-from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.mosquitto import Broker, free_port
-from tests.test_addon import TOKEN, FakeSupervisor, mqtt_answer, pump_options
 from tests.test_deploy import header_commands
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -364,73 +362,4 @@ def test_compose_check_service_runs_without_the_adapter(image: str) -> None:
                        timeout=120, check=False)  # fmt: skip
 
 
-# --- the Home Assistant add-on ---------------------------------------------------------------
-
-
-@pytest.fixture
-def modbus_tcp_pump(tmp_path: Path) -> Iterator[int]:
-    """The simulator serving a Nastec pump (unit 1) on a free loopback TCP port."""
-    port = free_port()
-    log = (tmp_path / "tcp-simulator.log").open("w+")
-    simulator = subprocess.Popen(
-        [sys.executable, "-m", "bridge.cli", "simulate", "--mapping", "nastec_vasco",
-         "--unit", "1", "--tcp", f"127.0.0.1:{port}"],
-        stdout=log, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
-    try:
-        for _ in range(200):  # bounded: 200 looks, 0.1 s apart
-            if "serving" in (tmp_path / "tcp-simulator.log").read_text():
-                break
-            assert simulator.poll() is None, "the simulator exited"
-            time.sleep(0.1)
-        else:
-            pytest.fail("the simulator never said it was serving")
-        yield port
-    finally:
-        simulator.send_signal(signal.SIGTERM)
-        simulator.wait(10)
-        log.close()
-
-
-def test_the_addon_image_on_a_fake_supervisor(
-    image: str, mosquitto_auth: Broker, modbus_tcp_pump: int, tmp_path: Path
-) -> None:
-    """The add-on built FROM the image (as the Supervisor builds it, the base named by
-    BRIDGE_IMAGE), run as the Supervisor runs it: options in /data/options.json, the token
-    in SUPERVISOR_TOKEN. It asks the (fake) Supervisor for the broker, logs in with the
-    user and password it got, publishes the pump, and turns healthy."""
-    addon = f"{IMAGE}-addon"
-    docker(
-        "build", "--network", "host", "--build-arg", f"BRIDGE_IMAGE={image}", "-t", addon,
-        str(ROOT / "homeassistant-addon" / "modbus_mqtt_bridge"),
-    )  # fmt: skip
-    options = pump_options(modbus_tcp_pump)
-    (tmp_path / "options.json").write_text(json.dumps(options), encoding="utf-8")
-    (tmp_path / "options.json").chmod(0o644)
-    metrics_port = free_port()
-    name = f"pytest-addon-{os.getpid()}"
-    with FakeSupervisor(mqtt_answer(mosquitto_auth)) as supervisor:
-        docker(
-            "run", "-d", "--name", name, "--network", "host",
-            "--health-interval", "1s", "--health-start-period", "0s", "--health-retries", "1",
-            "-e", f"SUPERVISOR_TOKEN={TOKEN}", "-e", f"SUPERVISOR_API={supervisor.url}",
-            "-e", f"BRIDGE_HEALTH_URL=http://127.0.0.1:{metrics_port}/health",
-            "-v", f"{tmp_path / 'options.json'}:/data/options.json:ro", addon,
-        )  # fmt: skip
-        try:
-            wait_for_health(name, "healthy")
-            login = (BROKER_USER, BROKER_PASSWORD)
-            assert (
-                first_message(mosquitto_auth, "modbus/pump/availability", login=login) == b"online"
-            )
-            config = first_message(mosquitto_auth, "homeassistant/device/pump/config", login=login)
-            assert json.loads(config)["device"]["name"] == "Borehole pump"
-            logs = docker("logs", name)
-            assert (
-                f"broker mqtt://127.0.0.1:{mosquitto_auth.port} (from the Supervisor)"
-                in logs.stdout
-            )
-            assert supervisor.requests == [("/services/mqtt", f"Bearer {TOKEN}")]
-        finally:
-            docker("rm", "-f", "-v", name, check=False)
-            docker("rmi", addon, check=False)
+# The Home Assistant add-on, built as the Supervisor builds it: tests/test_addon_docker.py.
