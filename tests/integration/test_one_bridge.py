@@ -104,10 +104,13 @@ async def test_a_second_bridge_stands_by_and_a_command_runs_once(
             assert offline_seen == 0
 
 
-def bridge_config_for(broker: Broker, port: int) -> Any:
-    """One pump on one TCP bus, as two copies of one config file would have it."""
+def bridge_config_for(broker: Broker | str, port: int, **bridge: Any) -> Any:
+    """One pump on one TCP bus, as two copies of one config file would have it (on the
+    broker, or on a URL: a relay in front of it)."""
+    url = broker if isinstance(broker, str) else broker.url
     data = {
-        "mqtt": {"url": broker.url, "base_topic": "modbus", "command_expiry": 3},
+        "mqtt": {"url": url, "base_topic": "modbus", "command_expiry": 3},
+        "bridge": bridge,
         "buses": [
             {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port, "timeout": 0.5}
         ],
@@ -227,7 +230,7 @@ async def test_an_unanswered_subscription_is_asked_again_and_state_goes_out_mean
         observing(mosquitto, *watched) as observer,
     ):
         relay.unanswered = b"modbus/+/set"
-        bridge = Bridge(bridge_config_for_url(url, port))
+        bridge = Bridge(bridge_config_for(url, port, health_interval=0.5))
         with caplog.at_level(logging.INFO, logger="bridge"):
             async with started(bridge):
                 await eventually(lambda: observer.retained.get(watched[0]) == b"online", 10)
@@ -248,15 +251,3 @@ async def test_an_unanswered_subscription_is_asked_again_and_state_goes_out_mean
     assert any("subscribed to modbus/+/set" in r.getMessage() for r in caplog.records)
     sessions = [r for r in caplog.records if r.getMessage().startswith("MQTT connected to")]
     assert len(sessions) == 1  # one session throughout: the unanswered SUBACK did not end it
-
-
-def bridge_config_for_url(url: str, port: int) -> Any:
-    data = {
-        "mqtt": {"url": url, "base_topic": "modbus", "command_expiry": 3},
-        "bridge": {"health_interval": 0.5},
-        "buses": [
-            {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port, "timeout": 0.5}
-        ],
-        "devices": [{"id": PUMP, "bus": "tcp", "unit": 1, "mapping": PUMP, "poll": {"fast": 0.5}}],
-    }
-    return load_config_data(data, Path("site.yaml"))

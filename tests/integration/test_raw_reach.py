@@ -29,7 +29,7 @@ from bridge.modbus.simulator import Simulator
 from tests.integration.harness import cancel, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.test_management import client_of, online, request
-from tests.integration.web import free_port, http
+from tests.integration.web import free_port, http, listening
 
 ANY_UNIT = 0  # the simulated drive answers every unit id
 COMMAND, SET_VALUE, PASSWORD = 0x2000, 0x1000, 0x1F00  # P2 wire addresses
@@ -68,19 +68,6 @@ async def drive_site(
             yield running, sim
         finally:
             await cancel(task)
-
-
-async def listening(port: int) -> None:
-    """Wait until the web page accepts connections."""
-    async with asyncio.timeout(10):
-        while True:
-            try:
-                _, writer = await asyncio.open_connection("127.0.0.1", port)
-            except OSError:
-                await asyncio.sleep(0.05)
-                continue
-            writer.close()
-            return
 
 
 def held(sim: Simulator) -> tuple[int | None, int | None]:

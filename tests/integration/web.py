@@ -67,13 +67,14 @@ async def site(
         running = Bridge(load_config_data(data, folder / "config.yaml"))
         task = asyncio.create_task(running.run())
         try:
-            await _listening(port)
+            await listening(port)
             yield Site(running, sim, port)
         finally:
             await cancel(task)
 
 
-async def _listening(port: int) -> None:
+async def listening(port: int) -> None:
+    """Wait until the web page accepts connections."""
     async with asyncio.timeout(10):
         while True:
             try:
