@@ -61,6 +61,10 @@ from homeassistant.const import __version__ as ha_version  # type: ignore[import
 from homeassistant.core import HomeAssistant  # type: ignore[import-not-found]
 from homeassistant.helpers.template import Template  # type: ignore[import-not-found]
 
+# A write-only select's state: an option by the label its link reads, else none
+# (discovery_entity.command_state_template).
+_LINKED = re.compile(r"^\{% set s = value_json\.(\w+) %\}\{\{ (\{.*\})\.get\(s\) \}\}$")
+_NO_STATE = "{{ none }}"
 _NESTED = re.compile(r"value_json\.get\('(\w+)', \{\}\)\.get\('([^']+)', \{\}\)\.get\('(\w+)'\)")
 GOLDEN = Path(__file__).resolve().parent.parent / "tests" / "golden" / "discovery"
 PREFIX = "homeassistant"
@@ -217,6 +221,8 @@ def _document(template: str, sample: Any) -> dict[str, Any]:
     """A state document holding ``sample`` where ``template`` reads: a device's flat JSON
     (``value_json.key``), or the bridge/health report (``value_json.get('buses', {}).get('id',
     {}).get('field')``)."""
+    if template == _NO_STATE:
+        return {"status": sample, "alarms": []}
     nested = _NESTED.search(template)
     if nested is not None:
         section, name, field = nested.groups()
@@ -227,8 +233,13 @@ def _document(template: str, sample: Any) -> dict[str, Any]:
 
 def _samples(platform: str, config: dict[str, Any]) -> list[Any]:
     """Values the state document may hold for a component (null = unknown)."""
-    if "* 100" in config["value_template"].template:
+    template = config["value_template"].template
+    if "* 100" in template:
         return [0.25, 1.0]  # a fraction the report always holds (bus utilisation)
+    if linked := _LINKED.match(template):  # the labels it shows, one it does not, unknown
+        return [*json.loads(linked.group(2)), "a_label_not_linked", None]
+    if template == _NO_STATE:
+        return [config["options"][0], None]
     if platform in ("binary_sensor", "switch"):
         return [True, False, None]
     if config.get("options"):
@@ -247,9 +258,13 @@ def _refusal(platform: str, config: dict[str, Any], rendered: str, sample: Any) 
     if "in value_json.alarms" in config["value_template"].template:  # Active alarms by name
         ok = rendered in ("Fault a, Fault b", "fault_a, fault_b")
         return None if ok else "expected the joined alarm names"
-    if sample is None:
+    template = config["value_template"].template
+    if sample is None or template == _NO_STATE:
         ok = rendered in ("None", "") if platform != "text" else rendered == ""
         return None if ok else "unknown must render None (or '' for text)"
+    if linked := _LINKED.match(template):
+        shown = json.loads(linked.group(2)).get(sample)
+        return None if rendered == str(shown) else f"not the option linked ({shown})"
     if platform == "binary_sensor":
         ok = rendered in (config["payload_on"], config["payload_off"])
         return None if ok else "neither payload_on nor payload_off"

@@ -17,7 +17,7 @@ from pydantic import ValidationError
 
 from bridge.core.address import to_wire
 from bridge.core.convention import convention_problems
-from bridge.core.entity import Access, DataType, Entity, Table
+from bridge.core.entity import Access, DataType, Entity, StateLink, Table
 from bridge.core.hass import presentation_problems
 from bridge.core.protocol import Protocol
 
@@ -176,6 +176,8 @@ def _toggle_and_requires(mapping: Mapping, key: str, e: Entity) -> Iterator[str]
             yield f"entities.{key}.toggle_of: {e.toggle_of!r} must be a readable boolean"
         elif not _implies(e.when, target.when, mapping):
             yield f"entities.{key}.toggle_of: {e.toggle_of!r} is missing for some option values"
+    if e.state_from is not None:
+        yield from _state_link_problems(mapping, key, e, e.state_from)
     for ref, wanted in e.requires.items():
         target = entities.get(ref)
         values = wanted if isinstance(wanted, list) else [wanted]
@@ -189,6 +191,22 @@ def _toggle_and_requires(mapping: Mapping, key: str, e: Entity) -> Iterator[str]
             yield f"entities.{key}.requires.{ref}: not one of {ref!r}'s labels"
         elif target.kind not in ("bool", "enum"):
             yield f"entities.{key}.requires: {ref!r} must be a boolean or an enum"
+
+
+def _state_link_problems(mapping: Mapping, key: str, e: Entity, link: StateLink) -> Iterator[str]:
+    """``state_from`` names a readable enum present whenever the select is, by labels it
+    has."""
+    ref = link.entity
+    target = mapping.entities.get(ref)
+    if target is None or target.kind != "enum" or not target.readable:
+        yield f"entities.{key}.state_from.entity: {ref!r} must be a readable enum"
+    elif not _implies(e.when, target.when, mapping):
+        yield f"entities.{key}.state_from.entity: {ref!r} is missing for some option values"
+    else:
+        labels = set((target.enum or {}).values())
+        for label in link.labels:
+            if label not in labels:
+                yield f"entities.{key}.state_from.labels: {label!r} is not one of {ref!r}'s labels"
 
 
 def _is_kind(entity: Entity, kind: str) -> bool:

@@ -12,9 +12,11 @@ components one by one on ``<prefix>/<component>/<device>/<key>/config`` with the
 options inlined.
 
 The state topic is set per component rather than shared at the root: Home Assistant
-copies a shared ``state_topic`` into every component, and a write-only number or select
-(a command word) would then parse the whole state document as its value. Without a
-state topic those run optimistic, as they must.
+copies a shared ``state_topic`` into every component, and a write-only number (a
+setpoint the device does not read back) would then parse the whole state document as its
+value. A write-only select (a command
+word) has a template of its own on the document (``discovery_entity.
+command_state_template``).
 
 The bridge is a device of its own: a connectivity binary_sensor on ``<base>/bridge/state``
 and, per bus, diagnostic sensors whose value templates read the periodic

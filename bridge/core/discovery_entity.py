@@ -9,12 +9,16 @@ unique_id) when it can be read.
 
 Values come from the device's JSON state document (``<base>/<device>``) through
 ``{{ value_json.<key> }}``; a read-only component gets ``expire_after`` so that a value
-the bridge stopped refreshing goes unavailable. Write-only components have no state
-topic, which makes Home Assistant run them optimistic.
+the bridge stopped refreshing goes unavailable. A write-only select (a command word) reads
+the device's document too, for the option its ``state_from`` link shows (the drive's status
+``standby`` as ``stop``), else for nothing: its state is unknown, never the last option
+chosen, which Home Assistant would show without a state topic (optimistic). Other
+write-only components (buttons; numbers and texts, none shipped) have no state topic.
 """
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Callable
 from collections.abc import Mapping as AnyMapping
@@ -32,7 +36,7 @@ from bridge.core.codec import (
     raw_bounds,
     scale_value,
 )
-from bridge.core.entity import Component, DataType, Entity, PollClass
+from bridge.core.entity import Component, DataType, Entity, PollClass, StateLink
 from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
 from bridge.core.mapping import Point
 from bridge.core.topics import Topics
@@ -353,7 +357,23 @@ def options_of(key: str, entity: Entity, context: ComponentContext) -> list[str]
 
 
 def _select(key: str, entity: Entity, context: ComponentContext) -> Config:
-    return _command(key, entity, context) | {"options": options_of(key, entity, context)}
+    config = _command(key, entity, context) | {"options": options_of(key, entity, context)}
+    if not entity.readable:  # a command word: not optimistic (it would show the last choice)
+        config |= {
+            "state_topic": context.topics.device(context.device_id),
+            "value_template": command_state_template(entity.state_from),
+        }
+    return config
+
+
+def command_state_template(link: StateLink | None) -> str:
+    """The state of a write-only select: the option its ``state_from`` link shows for the
+    label read (``{% set s = value_json.status %}{{ {"standby": "stop"}.get(s) }}``),
+    else none; Home Assistant shows a rendered ``None`` as unknown, without a warning."""
+    if link is None:
+        return "{{ none }}"
+    shown = json.dumps(link.labels, ensure_ascii=False)
+    return f"{{% set s = value_json.{link.entity} %}}{{{{ {shown}.get(s) }}}}"
 
 
 def _switch(key: str, entity: Entity, context: ComponentContext) -> Config:

@@ -145,6 +145,20 @@ class RawRange(BaseModel):
     max: int | None = None
 
 
+class StateLink(BaseModel):
+    """Where a write-only select's state is read: an enum entity's label, shown as one of
+    the select's options (the drive's status ``standby`` as the command ``stop``). A label
+    not listed shows the select's state as unknown: a command word the device does not
+    read back has no state of its own to remember."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    entity: str = Field(description="key of a readable enum entity")
+    labels: dict[str, str] = Field(
+        min_length=1, description="a label of that entity -> the option it shows"
+    )
+
+
 class Variant(BaseModel):
     """Field values that replace the entity's own for some device option values.
 
@@ -221,6 +235,11 @@ class Entity(BaseModel):
         None,
         description="a write-only coil that toggles the state of this boolean entity: a "
         "switch whose ON/OFF is sent (as the ON word) only when the state read differs",
+    )
+    state_from: StateLink | None = Field(
+        None,
+        description="a write-only select's state, read from an enum entity (label -> "
+        "option); without it the select shows no state",
     )
     write_interval: Duration | None = Field(
         None,
@@ -470,7 +489,19 @@ def _check_write(e: Entity) -> str | None:
         e.table is not Table.COIL or e.access is not Access.WRITE or e.press is not None or e.pulse
     ):
         return "toggle_of is for a write-only coil that is not a button (a switch)"
-    return _check_dangerous_below(e)
+    return _check_state_from(e) or _check_dangerous_below(e)
+
+
+def _check_state_from(e: Entity) -> str | None:
+    """``state_from`` gives a write-only select a state, in its own options."""
+    if e.state_from is None:
+        return None
+    if e.access is not Access.WRITE or e.component is not Component.SELECT:
+        return "state_from is for a write-only select (a readable entity shows what it reads)"
+    unknown = sorted(set(e.state_from.labels.values()) - set((e.enum or {}).values()))
+    if unknown:
+        return f"state_from.labels: {', '.join(map(repr, unknown))} is not one of the options"
+    return None
 
 
 def _check_dangerous_below(e: Entity) -> str | None:

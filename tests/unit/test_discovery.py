@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pydantic import ValidationError
 
 import bridge
 from bridge.core.codec import limits_of, unit_of
@@ -34,7 +35,13 @@ from bridge.core.discovery_alarms import alarm_names
 from bridge.core.discovery_entity import admitted, shown_readings
 from bridge.core.entity import Table
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, build_health_report
-from bridge.core.mapping import Mapping, builtin_mapping_names, builtin_mapping_path, load_mapping
+from bridge.core.mapping import (
+    Mapping,
+    builtin_mapping_names,
+    builtin_mapping_path,
+    format_validation_errors,
+    load_mapping,
+)
 from bridge.core.simulation import initial_image
 from bridge.core.topics import Topics
 from tests.factory import make_mapping
@@ -398,7 +405,6 @@ def test_text() -> None:
 @pytest.mark.parametrize(
     ("entity", "platform", "extra"),
     [
-        ({"enum": {1: "run", 2: "stop"}}, "select", {"options": ["run", "stop"]}),
         ({"min": 0, "max": 9}, "number", {"min": 0.0, "max": 9.0, "step": 1.0, "mode": "box"}),
         ({"type": "bool"}, "switch", {"payload_on": "ON", "payload_off": "OFF"}),
         ({"type": "ascii", "count": 2}, "text", {"max": 4, "mode": "text"}),
@@ -418,6 +424,84 @@ def test_write_only_entities_have_no_state(
         }
         | extra
     )
+
+
+COMMAND = {"address": 9, "access": "w", "enum": {1: "run", 2: "stop", 3: "reset"}}
+DRIVE_STATE = {"name": "State", "address": 10, "enum": {1: "running", 2: "standby", 3: "fault"}}
+
+
+def test_a_write_only_select_shows_no_remembered_state() -> None:
+    """Without a state topic Home Assistant runs a select optimistic: it would show the
+    last option chosen (run) after the device stopped or tripped. A rendered None is its
+    unknown state."""
+    config = _one(COMMAND)
+    assert config == _ids("select") | {
+        "name": "Value",
+        "enabled_by_default": True,
+        "command_topic": "modbus/dev/value/set",
+        "options": ["run", "stop", "reset"],
+        "state_topic": STATE,
+        "value_template": "{{ none }}",
+    }
+
+
+def test_a_write_only_select_shows_the_state_it_is_linked_to() -> None:
+    link = {"entity": "state", "labels": {"running": "run", "standby": "stop"}}
+    cmps = _cmps(
+        {"command": COMMAND | {"name": "Command", "state_from": link}, "state": DRIVE_STATE}
+    )
+    assert cmps["command"]["state_topic"] == STATE
+    assert cmps["command"]["value_template"] == (
+        '{% set s = value_json.state %}{{ {"running": "run", "standby": "stop"}.get(s) }}'
+    )
+
+
+@pytest.mark.parametrize(
+    ("link", "row"),
+    [
+        (
+            {"entity": "state", "labels": {"fault": "halt"}},
+            "entities.command: state_from.labels: 'halt' is not one of the options",
+        ),
+        (
+            {"entity": "state", "labels": {"tripped": "stop"}},
+            "entities.command.state_from.labels: 'tripped' is not one of 'state''s labels",
+        ),
+        (
+            {"entity": "speed", "labels": {"running": "run"}},
+            "entities.command.state_from.entity: 'speed' must be a readable enum",
+        ),
+        (
+            {"entity": "nothing", "labels": {"running": "run"}},
+            "entities.command.state_from.entity: 'nothing' must be a readable enum",
+        ),
+    ],
+)
+def test_a_state_link_names_an_enum_and_labels_both_have(link: dict[str, Any], row: str) -> None:
+    entities = {
+        "command": COMMAND | {"name": "Command", "state_from": link},
+        "state": DRIVE_STATE,
+        "speed": {"name": "Speed", "address": 11},
+    }
+    with pytest.raises(ValidationError) as caught:
+        make_mapping(entities)
+    assert list(format_validation_errors(caught.value)) == [row]
+
+
+@pytest.mark.parametrize(
+    ("fields", "row"),
+    [
+        ({"access": "rw"}, "entities.command: state_from is for a write-only select"),
+        ({"press": 1, "enum": None}, "entities.command: state_from is for a write-only select"),
+    ],
+)
+def test_a_state_link_is_for_a_write_only_select(fields: dict[str, Any], row: str) -> None:
+    link = {"entity": "state", "labels": {"running": "run"}}
+    command = {k: v for k, v in (COMMAND | fields).items() if v is not None}
+    entities = {"command": command | {"name": "Command", "state_from": link}, "state": DRIVE_STATE}
+    with pytest.raises(ValidationError) as caught:
+        make_mapping(entities)
+    assert list(format_validation_errors(caught.value))[0].startswith(row)
 
 
 # --- what is published ---------------------------------------------------------------------

@@ -19,6 +19,7 @@ from tests.extreme_states import Case, cases
 
 _PLAIN = re.compile(r"^\{\{ value_json\.(\w+) \}\}$")
 _TEXT = re.compile(r"^\{\{ value_json\.(\w+) if value_json\.\1 is not none else '' \}\}$")
+_LINKED = re.compile(r"^\{% set s = value_json\.(\w+) %\}\{\{ (\{.*\})\.get\(s\) \}\}$")
 _ALARMS = re.compile(
     r"^\{% set n = (\{.*\}) %\}\{% set text %\}\{% for k in value_json\.alarms %\}"
 )
@@ -31,6 +32,10 @@ def rendered(template: str, state: dict[str, Any]) -> str:
         names = json.loads(match.group(1))
         shown = [names.get(k, k.replace("_", " ").capitalize()) for k in state["alarms"]]
         return (", ".join(shown) or "none")[:TEXT_MAX]
+    if template == "{{ none }}":  # a write-only select without a state link
+        return "None"
+    if match := _LINKED.match(template):  # discovery_entity.command_state_template
+        return str(json.loads(match.group(2)).get(state[match.group(1)]))
     if match := _TEXT.match(template):
         value = state[match.group(1)]
         return "" if value is None else str(value)
