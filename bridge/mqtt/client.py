@@ -28,6 +28,18 @@ announces ``MAX_PACKET`` as the largest packet the bridge accepts (the broker dr
 bigger ones instead of sending them); ``Message.expiry`` carries the publisher's message
 expiry interval (the time it has left).
 
+The session (docs/brokers.md, per broker): every connection of one run of the bridge
+uses the same client id (``mqtt.client_id``, else ``run_client_id()``, drawn once per
+``run_with_reconnect``), with clean start (3.1.1: clean session) and a session expiry of 0,
+so the broker keeps nothing of a session once its connection ends. The same id on every
+reconnect, to whichever node of a cluster: the broker ends what is left of the previous
+connection at once (a half-open one it still believed in says its will then, before this
+connection's ``online``, not a keepalive and a half later over it) and NATS deletes the
+consumers the previous session left. A new id per run, so two bridges on one base topic
+never take each other's connections over (one of them stands by); a connection that a
+killed run left half-open therefore still says its will when the broker gives up on it,
+unless ``mqtt.client_id`` is set (then a restart takes it over too).
+
 Anything a broker answers that the protocol does not allow (a SUBACK with the wrong
 number of codes, a packet paho cannot parse) ends the session with
 MqttDisconnectedError, so the reconnect loop starts a new one; it never ends the process.
@@ -40,6 +52,7 @@ import contextlib
 import functools
 import logging
 import math
+import secrets
 import socket
 import ssl
 import time
@@ -256,6 +269,11 @@ class MqttClient:
         return self._config.broker_url
 
     @property
+    def client_id(self) -> str:
+        """The client id of this connection."""
+        return self._require().identifier
+
+    @property
     def protocol(self) -> str:
         """The MQTT version in use, ``"5"`` or ``"3.1.1"`` (after a fallback)."""
         if self._protocol is None:
@@ -315,14 +333,19 @@ class MqttClient:
                 f"{config.broker_url}: cannot read the password: {exc.strerror}"
             ) from exc
         limits = None
-        if protocol is aiomqtt.ProtocolVersion.V5:
+        v5 = protocol is aiomqtt.ProtocolVersion.V5
+        if v5:
             limits = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
             limits.MaximumPacketSize = MAX_PACKET
+            limits.SessionExpiryInterval = 0  # the session ends with the connection
         connection = _Connection(
             config.host,
             config.port,
             properties=limits,
             identifier=self._client_id,
+            # nothing kept between sessions: clean start (5), clean session (3.1.1)
+            clean_session=None if v5 else True,
+            clean_start=True if v5 else paho.MQTT_CLEAN_START_FIRST_ONLY,
             username=config.username,
             password=password,
             protocol=protocol,
@@ -585,6 +608,12 @@ class MqttClient:
         self._filters.discard(topic_filter)
 
 
+def run_client_id() -> str:
+    """A client id for one run of the bridge: ``modbusbridge`` and 10 random hex digits
+    (22 characters from MQTT 3.1.1's safe set: every broker takes it)."""
+    return f"modbusbridge{secrets.token_hex(5)}"
+
+
 def _send_at_once(connection: _Connection) -> None:
     """TCP_NODELAY on the session's socket. paho leaves Nagle's algorithm on, which holds a
     small publish (the state after a command) until the broker acknowledges the previous
@@ -687,6 +716,7 @@ async def run_with_reconnect(
             async with MqttClient(
                 attempt,
                 will_topic=will_topic,
+                client_id=loop.client_id,
                 version=loop.version,
                 announce=announce,
                 on_announced=functools.partial(loop.up, url),
@@ -720,6 +750,8 @@ class _Reconnection:
         self.backoff = backoff
         self.on_state = on_state or (lambda _: None)
         self.nodes = BrokerUrls(config.urls, shuffled=config.url_order == "random")
+        # one id for every connection of this run (module docstring: the session)
+        self.client_id = config.client_id or run_client_id()
         self.version: str | None = None  # what the broker answered last time
         self.outage: str | None = None
         self.standing_by = False
