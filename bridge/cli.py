@@ -9,6 +9,7 @@ import argparse
 import asyncio
 import importlib
 import json
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -22,11 +23,12 @@ from bridge.core.entity import Entity
 from bridge.core.mapping import (
     Mapping,
     builtin_mapping_names,
+    check_mapping_file,
     load_mapping,
     mapping_schema,
     resolve_mapping_path,
 )
-from bridge.errors import BridgeError, InputError, first_of
+from bridge.errors import BridgeError, InputError, MappingError, first_of
 from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 
 EXIT_OK = 0
@@ -133,6 +135,8 @@ def _run(args: argparse.Namespace, _: TextIO) -> int:
 
     loaded = load_config(args.config)
     configure_logging(args.log_level, args.log_format)
+    for row in loaded.warnings:  # once, at start; the mapping loads all the same
+        logging.getLogger("bridge.config").warning("%s: %s", args.config, row)
     try:
         asyncio.run(until_stopped(Bridge(loaded).run()))
     except ExceptionGroup as failed:  # the bridge's task groups wrap what ended it
@@ -150,9 +154,11 @@ def _check(args: argparse.Namespace, out: TextIO) -> int:
     entities = sum(
         len(loaded.mappings[d.id].active(d.options)) for d in config.devices if d.enabled
     )
+    _print_warnings(str(args.config), loaded.warnings)
+    warned = f", {len(loaded.warnings)} warning(s)" if loaded.warnings else ""
     print(
         f"{args.config}: ok ({len(config.buses)} bus(es), {len(config.devices)} device(s), "
-        f"{entities} entities)",
+        f"{entities} entities{warned})",
         file=out,
     )
     return EXIT_OK
@@ -226,16 +232,25 @@ def _parse_options(pairs: list[str], mapping: Mapping) -> dict[str, str]:
 
 
 def _validate(args: argparse.Namespace, out: TextIO) -> int:
+    """Every error and warning of each file; exit 2 when a file has errors (warnings, the
+    naming and enabled-default conventions, do not refuse a mapping)."""
     failed = 0
     for path in args.files:
-        try:
-            mapping = load_mapping(path)
-        except InputError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+        report = check_mapping_file(path)
+        if report.mapping is None:
+            print(f"error: {MappingError(report.source, list(report.errors))}", file=sys.stderr)
             failed += 1
-            continue
-        print(f"{path}: ok ({len(mapping.entities)} entities)", file=out)
+        _print_warnings(report.source, report.warnings)
+        if report.mapping is not None:
+            warned = f", {len(report.warnings)} warning(s)" if report.warnings else ""
+            print(f"{path}: ok ({len(report.mapping.entities)} entities{warned})", file=out)
     return EXIT_INVALID if failed else EXIT_OK
+
+
+def _print_warnings(source: str, rows: Sequence[str]) -> None:
+    if rows:
+        lines = "".join(f"\n  {row}" for row in rows)
+        print(f"warning: {source}: {len(rows)} warning(s){lines}", file=sys.stderr)
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], out: TextIO) -> None:

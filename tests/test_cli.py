@@ -162,3 +162,76 @@ def test_run_says_a_bridge_error_that_ended_it_in_one_line(
     monkeypatch.setattr(cli, "configure_logging", lambda *_: None)  # pytest keeps its handlers
     assert main(["run", "-c", str(EXAMPLE)]) == 1
     assert capsys.readouterr().err == "error: cannot publish to x: too long\n"
+
+
+OLD_STYLE = """manufacturer: Unknown (OEM)
+model: X1
+description: a user's mapping written before the naming conventions
+source: {title: manual}
+entities:
+  speed: {name: Motor SPEED, address: 1}
+  baud: {name: Baud rate, address: 2, ha: {entity_category: diagnostic, enabled: true}}
+"""
+OLD_STYLE_WARNINGS = [
+    "manufacturer: 'Unknown (OEM)' does not read as a company's name (write 'Generic' when "
+    "the manual names none, and what you know in a comment)",
+    "entities.speed.name: 'SPEED' is written in capitals: write it as a word, or add the "
+    "abbreviation to bridge/core/convention.py ('Motor SPEED')",
+    "entities.baud.ha.enabled: a diagnostic entity is disabled by default: say why it is "
+    "enabled in ha.enabled_reason",
+]
+
+
+def old_style_site(tmp_path: Path) -> Path:
+    (tmp_path / "mine.yaml").write_text(OLD_STYLE)
+    config = tmp_path / "site.yaml"
+    config.write_text(
+        "mqtt: {url: 'mqtt://127.0.0.1:1'}\n"
+        "buses: [{id: line, transport: tcp, host: 127.0.0.1, tcp_port: 1}]\n"
+        "devices:\n"
+        "  - {id: a, name: A, bus: line, unit: 1, mapping: mine.yaml}\n"
+        "  - {id: b, name: B, bus: line, unit: 2, mapping: mine.yaml}\n"
+    )
+    return config
+
+
+def test_a_users_mapping_that_breaks_a_naming_convention_still_loads(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The conventions are warnings for a user's mapping: validate and check say them once
+    (per file, not per device using it) and exit 0."""
+    config = old_style_site(tmp_path)
+    assert main(["mappings", "validate", str(tmp_path / "mine.yaml")]) == 0
+    out, err = capsys.readouterr()
+    assert out == f"{tmp_path / 'mine.yaml'}: ok (2 entities, 3 warning(s))\n"
+    assert err.splitlines() == [
+        f"warning: {tmp_path / 'mine.yaml'}: 3 warning(s)",
+        *(f"  {row}" for row in OLD_STYLE_WARNINGS),
+    ]
+    assert main(["check", "-c", str(config)]) == 0
+    out, err = capsys.readouterr()
+    assert out == f"{config}: ok (1 bus(es), 2 device(s), 4 entities, 3 warning(s))\n"
+    assert err.splitlines() == [
+        f"warning: {config}: 3 warning(s)",
+        *(f"  devices.a.mapping: mine.yaml: {row}" for row in OLD_STYLE_WARNINGS),
+    ]
+
+
+def test_run_logs_a_users_convention_warnings_once_at_start(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    started: list[Bridge] = []
+
+    async def starts(bridge: Bridge) -> None:
+        started.append(bridge)
+
+    config = old_style_site(tmp_path)
+    monkeypatch.setattr(Bridge, "run", starts)
+    monkeypatch.setattr(cli, "configure_logging", lambda *_: None)  # pytest keeps its handlers
+    with caplog.at_level("WARNING"):
+        assert main(["run", "-c", str(config)]) == 0
+    assert len(started) == 1
+    assert [(r.name, r.levelname, r.getMessage()) for r in caplog.records] == [
+        ("bridge.config", "WARNING", f"{config}: devices.a.mapping: mine.yaml: {row}")
+        for row in OLD_STYLE_WARNINGS
+    ]

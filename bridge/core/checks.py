@@ -1,5 +1,6 @@
-"""Whole-mapping checks: keys, addresses, references, options, function codes, overlaps, and
-the presentation conventions (``convention``: names, manufacturer, enabled defaults).
+"""Whole-mapping checks: keys, addresses, references, options, function codes, overlaps;
+apart, the presentation conventions (``convention``: names, manufacturer, enabled
+defaults), which are warnings for a user's mapping.
 
 Each check returns rows ``entities.<key>.<field>: message``; ``check_mapping`` runs them all
 so a user sees every problem of a file at once.
@@ -69,9 +70,17 @@ def check_mapping(mapping: Mapping) -> list[str]:
         rows.extend(_overlaps(mapping))
     if mapping.status is not None and mapping.status not in mapping.entities:
         rows.append(f"status: no entity {mapping.status!r}")
-    if not basis:  # names are compared per option combination: options must be valid
-        rows.extend(convention_problems(mapping, _variants(mapping)))
     return rows
+
+
+def check_conventions(mapping: Mapping) -> list[str]:
+    """The presentation conventions (``convention``) ``mapping`` breaks: errors for the
+    shipped mappings (their tests), warnings for a user's own, which load all the same
+    (a bridge upgrade does not stop a working site over a name). Names are compared per
+    option combination, so none are checked while options or variants are invalid."""
+    if any(_options(mapping)):
+        return []
+    return list(convention_problems(mapping, _variants(mapping)))
 
 
 def _keys(mapping: Mapping) -> Iterator[str]:

@@ -1,7 +1,10 @@
 """How a mapping presents its device to people: names, identity and enabled defaults. Pure.
 
 The rules of docs/mappings.md ("Names" and "Which entities are enabled"), as
-``location: message`` rows that ``checks.check_mapping`` reports with the others:
+``location: message`` rows (``checks.check_conventions``): warnings for a user's mapping,
+which loads all the same, and errors for the shipped ones (tests/mappings). None protects
+a device (entity ids come from keys, writes are guarded by ``dangerous`` and the config):
+a bridge upgrade must not stop a working site over a name.
 
 - a name reads as words: no internal key in it (a word with ``_``), no shouting (a word
   of three or more capitals that is not a known abbreviation, ``ABBREVIATIONS``), and no
@@ -114,7 +117,7 @@ def default_problem(entity: Entity) -> str | None:
 
 def _presented(key: str, entity: Entity) -> Iterator[tuple[str, Entity]]:
     """The entity and each of its variants applied, with their locations (only called on
-    a mapping whose variants validate: ``checks.check_mapping``)."""
+    a mapping whose variants validate: ``checks.check_conventions``)."""
     yield f"entities.{key}", entity
     for index, variant in enumerate(entity.variants):
         yield f"entities.{key}.variants.{index}", entity.with_variant(variant)

@@ -15,10 +15,11 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
 from bridge.core import checks
 from bridge.core.address import format_address, to_wire
+from bridge.core.convention import name_problems
 from bridge.core.entity import Entity, Table
 from bridge.core.protocol import OptionSpec, Protocol
 from bridge.core.yaml_source import parse_yaml
@@ -179,53 +180,137 @@ def printed_address(points: Iterable[Point], table: Table, wire: int, protocol: 
 # --- loading ------------------------------------------------------------------------
 
 
-def parse_mapping(text: str, source: str) -> Mapping:
-    """Validate mapping YAML text; raise MappingError with ``entity.field: message`` rows."""
+@dataclass(frozen=True, slots=True)
+class MappingReport:
+    """Every problem of one mapping file: ``errors`` refuse it; ``warnings`` (the
+    presentation conventions: names, manufacturer, enabled defaults) do not. ``mapping``
+    is the mapping loaded, None when there are errors."""
+
+    source: str
+    mapping: Mapping | None
+    errors: tuple[str, ...]
+    warnings: tuple[str, ...]
+
+
+def check_mapping_text(text: str, source: str) -> MappingReport:
+    """Every layer of checks in one run: the YAML, the fields, the checks across
+    entities and the protocol (on the parts that validate when some do not), the
+    conventions. Only a file that is not YAML, or not a mapping at the top, stops early."""
     try:
         data = parse_yaml(text, source)
     except ValueError as exc:
-        raise MappingError(source, [str(exc)]) from None
+        return MappingReport(source, None, (str(exc),), ())
     if not isinstance(data, dict):
-        raise MappingError(source, ["the file must hold a mapping (key: value) at the top"])
+        top = "the file must hold a mapping (key: value) at the top"
+        return MappingReport(source, None, (top,), ())
     try:
-        return Mapping.model_validate(data)
+        mapping = Mapping.model_validate(data)
     except ValidationError as exc:
         rows = list(format_validation_errors(exc))
-    rows += _whole_mapping_rows(data, rows)
-    raise MappingError(source, list(dict.fromkeys(rows)))
+    else:
+        return MappingReport(source, mapping, (), tuple(mapping_warnings(mapping)))
+    more, warnings = _rows_of_valid_parts(data)
+    return MappingReport(source, None, tuple(dict.fromkeys(rows + more)), tuple(warnings))
 
 
-def _whole_mapping_rows(data: dict[str, Any], rows: list[str]) -> list[str]:
-    """When only some entities are invalid, the checks across entities (references,
-    overlaps, function codes...) still run on the valid ones, so that a file's problems
-    are reported in one run. References to an invalid entity are not reported twice."""
-    entities = data.get("entities")
-    if not isinstance(entities, dict) or any(not r.startswith("entities.") for r in rows):
-        return []  # the header or protocol is wrong: checks across entities would guess
-    valid, invalid = {}, set()
-    for key, raw in entities.items():
-        try:
-            Entity.model_validate(raw)
-            valid[key] = raw
-        except ValidationError:
-            invalid.add(key)
-    if not valid or not invalid:
-        return []
+def parse_mapping(text: str, source: str) -> Mapping:
+    """Validate mapping YAML text; raise MappingError with ``entity.field: message`` rows.
+    Convention warnings do not refuse it (``mapping_warnings``)."""
+    report = check_mapping_text(text, source)
+    if report.mapping is None:
+        raise MappingError(source, list(report.errors))
+    return report.mapping
+
+
+def mapping_warnings(mapping: Mapping) -> list[str]:
+    """The conventions ``mapping`` breaks (``checks.check_conventions``), as rows."""
+    return list(mapping.memo("warnings", lambda: tuple(checks.check_conventions(mapping))))
+
+
+def _rows_of_valid_parts(data: dict[str, Any]) -> tuple[list[str], list[str]]:
+    """Errors across entities and convention warnings of the parts of an invalid mapping
+    that validate (an invalid entity left out, an invalid protocol field at its default),
+    so that a file's problems are reported in one run. A reference to an invalid entity is
+    not reported twice; the checks across entities wait for a valid addressing rule and
+    valid options (addresses and option values would be guessed)."""
+    raw = data.get("entities")
+    entities: dict[str, Any] = raw if isinstance(raw, dict) else {}
+    kept = {key: e for key, e in ((k, _valid(Entity, v)) for k, v in entities.items()) if e}
+    protocol = _valid_protocol(data.get("protocol", {}))
+    options = _valid(_OPTIONS, data.get("options", {}))
+    status = data.get("status")
+    partial = Mapping.model_construct(
+        manufacturer=_text(data, "manufacturer"),
+        model=_text(data, "model"),
+        description=_text(data, "description"),
+        source=Source(title=""),
+        protocol=protocol or Protocol(),
+        options=options or {},
+        status=status if isinstance(status, str) else None,
+        entities=kept,
+    )
+    invalid = [key for key in entities if key not in kept]
+    warnings = checks.check_conventions(partial) + [
+        f"entities.{key}.name: {problem}"
+        for key in invalid
+        if isinstance(entities[key], dict) and isinstance(name := entities[key].get("name"), str)
+        for problem in name_problems(name)
+    ]
+    if not kept or protocol is None or options is None:
+        return [], warnings
+    gone = tuple(f"no entity {key!r}" for key in invalid)
+    return [row for row in checks.check_mapping(partial) if not row.endswith(gone)], warnings
+
+
+_OPTIONS: TypeAdapter[dict[str, OptionSpec]] = TypeAdapter(dict[str, OptionSpec])
+
+
+def _valid(model: Any, data: object) -> Any:
+    """``data`` validated as ``model`` (a model class or a TypeAdapter), or None."""
+    validate = model.validate_python if isinstance(model, TypeAdapter) else model.model_validate
     try:
-        Mapping.model_validate(data | {"entities": valid})
+        return validate(data)
+    except ValidationError:
+        return None
+
+
+def _valid_protocol(data: object) -> Protocol | None:
+    """The protocol with its invalid fields at their defaults; None when the addressing
+    rule is invalid (or the section is not a mapping)."""
+    if not isinstance(data, dict):
+        return None
+    try:
+        return Protocol.model_validate(data)
     except ValidationError as exc:
-        gone = tuple(f"no entity {key!r}" for key in invalid)
-        return [row for row in format_validation_errors(exc) if not row.endswith(gone)]
-    return []
+        dropped = {str(error["loc"][0]) for error in exc.errors() if error["loc"]}
+    if "addressing" in dropped:
+        return None
+    found: Protocol | None = _valid(Protocol, {k: v for k, v in data.items() if k not in dropped})
+    return found
+
+
+def _text(data: dict[str, Any], name: str) -> str:
+    value = data.get(name)
+    return value if isinstance(value, str) else "Generic"
 
 
 def load_mapping(path: Path) -> Mapping:
     """Read and validate one mapping file."""
+    report = check_mapping_file(path)
+    if report.mapping is None:
+        raise MappingError(report.source, list(report.errors))
+    return report.mapping
+
+
+def check_mapping_file(path: Path) -> MappingReport:
+    """Read one mapping file and report all its problems (``check_mapping_text``)."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise MappingError(str(path), [f"cannot read {path.absolute()}: {exc.strerror}"]) from None
-    return parse_mapping(text, str(path))
+        return MappingReport(
+            str(path), None, (f"cannot read {path.absolute()}: {exc.strerror}",), ()
+        )
+    return check_mapping_text(text, str(path))
 
 
 def mappings_folder() -> Path:

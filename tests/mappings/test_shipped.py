@@ -17,6 +17,7 @@ from bridge.core.mapping import (
     builtin_mapping_names,
     builtin_mapping_path,
     load_mapping,
+    mapping_warnings,
 )
 from bridge.errors import MissingDataError, ValueRejectedError
 
@@ -70,6 +71,13 @@ def test_presentation_conventions(name: str) -> None:
             assert e.dangerous, key
         if e.component is Component.BUTTON:
             assert e.access is Access.WRITE, key
+
+
+@pytest.mark.parametrize("name", sorted(MAPPINGS))
+def test_the_naming_conventions_are_errors_for_the_shipped_mappings(name: str) -> None:
+    """A user's mapping loads with convention warnings (a bridge upgrade does not stop a
+    working site over a name); a shipped one has none: here they are errors."""
+    assert mapping_warnings(MAPPINGS[name]) == []
 
 
 @pytest.mark.parametrize("name", sorted(MAPPINGS))

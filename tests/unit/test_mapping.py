@@ -11,6 +11,8 @@ from pydantic import ValidationError
 from bridge.core.entity import Component, PollClass, Table
 from bridge.core.mapping import (
     builtin_mapping_path,
+    check_mapping_file,
+    check_mapping_text,
     format_validation_errors,
     load_mapping,
     parse_mapping,
@@ -516,21 +518,66 @@ entities:
     )
 
 
-def test_a_bad_header_is_reported_without_guesses_about_the_entities() -> None:
-    text = (
-        HEADER.replace("model: T1", "model: [T1]")
-        + """
+def test_a_bad_header_field_hides_only_the_checks_it_decides() -> None:
+    """A bad model name hides nothing; a bad protocol number is taken at its default for
+    the checks across entities; a bad addressing rule stops them (addresses would be
+    guessed), not the conventions."""
+    entities = """
 entities:
   speed: {name: Speed, address: 1, scale: zero}
   level: {name: Level, address: 2, unit_from: units}
+  coil: {name: Relay STATUS, address: 3, table: coil}
+"""
+    model = HEADER.replace("model: T1", "model: [T1]") + entities
+    limit = HEADER + "protocol: {max_read_registers: 200, function_codes: [3, 4]}\n" + entities
+    rule = HEADER + "protocol: {addressing: {offset: many}, function_codes: [3]}\n" + entities
+    reports = [check_mapping_text(text, "pump.yaml") for text in (model, limit, rule)]
+    assert [[row.split(":")[0] for row in report.errors] for report in reports] == [
+        ["model", "entities.speed.scale", "entities.level.unit_from"],
+        [
+            "protocol.max_read_registers",
+            "entities.speed.scale",
+            "entities.level.unit_from",
+            "entities.coil.table",
+        ],
+        ["protocol.addressing.offset", "entities.speed.scale"],
+    ]
+    assert all(r.warnings == ("entities.coil.name: 'STATUS' is written in capitals: write "
+               "it as a word, or add the abbreviation to bridge/core/convention.py "
+               "('Relay STATUS')",) for r in reports)  # fmt: skip
+
+
+def test_one_error_in_each_layer_is_reported_in_one_run(tmp_path: Path) -> None:
+    """Fields (a bad scale), checks across fields and entities (a bit field of a u32, two
+    values on one register), the protocol (a read limit Modbus does not allow, a coil on a
+    device without function 1) and the conventions (a name in capitals, as a warning)."""
+    path = tmp_path / "layers.yaml"
+    path.write_text(
+        HEADER
+        + """protocol: {max_read_registers: 200, function_codes: [3, 6]}
+entities:
+  speed: {name: Speed, address: 1, scale: zero}
+  temp: {name: Temperature, address: 2, bit: 3, type: u32}
+  level: {name: Level, address: 5}
+  twin: {name: Twin, address: 5}
+  relay: {name: Relay, address: 6, table: coil}
+  mode: {name: Motor MODE, address: 7}
 """
     )
-    with pytest.raises(MappingError) as caught:
-        parse_mapping(text, "pump.yaml")
-    assert [issue.split(":")[0] for issue in caught.value.issues] == [
-        "model",
-        "entities.speed.scale",
-    ]
+    report = check_mapping_file(path)
+    assert report.mapping is None
+    assert report.errors == (
+        "protocol.max_read_registers: Input should be less than or equal to 125",
+        "entities.speed.scale: Input should be a valid number, unable to parse string as a number",
+        "entities.temp: bit fields are taken from u16 registers",
+        "entities.relay.table: reading coil needs function 1, which the device does not support",
+        "entities.twin.address: a second whole value on the same register with 'level' at "
+        "holding 5",
+    )
+    assert report.warnings == (
+        "entities.mode.name: 'MODE' is written in capitals: write it as a word, or add the "
+        "abbreviation to bridge/core/convention.py ('Motor MODE')",
+    )
 
 
 def test_duplicate_keys_are_refused() -> None:
