@@ -265,3 +265,51 @@ async def test_no_warning_or_error_over_start_config_change_and_stop(
         assert not found, f"{len(found)} warnings and errors:\n" + "\n".join(found[:40])
     finally:
         await socket.close()
+
+
+async def test_a_command_select_shows_what_the_drive_does_not_the_last_choice(
+    hass: HomeAssistant, ha_broker: Broker
+) -> None:
+    """select.fan_drive_command (write-only, P2 2000H) follows the drive's status word:
+    forward_run while it runs forward, stop once it stands by, whichever stop was chosen
+    (coast_stop is no state of its own); Home Assistant logs nothing about it."""
+    sim = simulator(*((seed.unit, seed.mapping) for seed in SEEDS))
+    socket = await hass.websocket()
+    command, status = "select.fan_drive_command", "sensor.fan_drive_status"
+
+    async def choose(option: str) -> None:
+        await socket.call(
+            "call_service",
+            domain="select",
+            service="select_option",
+            service_data={"option": option},
+            target={"entity_id": command},
+        )
+
+    def shown(select: str, drive: str) -> Callable[[], Awaitable[str]]:
+        async def check() -> str:
+            states = await socket.states()
+            now = (states[command]["state"], states[status]["state"])
+            return "" if now == (select, drive) else f"{command}, {status}: {now}"
+
+        return check
+
+    start = len(hass.log_records())
+    try:
+        async with (
+            serving_tcp(sim) as port,
+            observing(ha_broker, f"{PREFIX}/#") as observer,
+        ):
+            async with bridge_running(
+                site_config(ha_broker, port, seed_devices()), remove_on_stop=True
+            ):
+                await settled(socket, observer)
+                await choose("forward_run")
+                await until(shown("forward_run", "running_forward"), 60)
+                await choose("coast_stop")
+                await until(shown("stop", "standby"), 60)
+            await until(lambda: _none_left(socket))
+    finally:
+        await socket.close()
+    found = problems(hass.log_records()[start:], (command, "fan_drive"))
+    assert not [p for p in found if HA_REMOVAL_ECHO not in p], found
