@@ -55,7 +55,8 @@ endif
 # apt), then per version tools/check_ha_discovery.py on the discovery snapshots and the
 # extreme states (tools/ha_check.sh) and tests/ha (a headless Home Assistant on a private
 # broker: entity ids, the documented ids, a clean log over start, config change and stop).
-HA_ROOT     ?= .ha/forky
+# a machine-wide cache (3 GB): a fresh clone on the same machine (CI) finds it built
+HA_ROOT     ?= $(HOME)/.cache/modbus-mqtt-bridge/ha-forky
 HA_VERSIONS ?= 2025.10.4 2026.11.0
 
 test-ha: $(DEV)

@@ -4,7 +4,7 @@
 # and the extreme state cases (computed here by the bridge's PYTHON) are copied into the
 # chroot and checked there.
 #
-#     tools/ha_check.sh .ha/forky 2026.11.0 .venv/bin/python
+#     tools/ha_check.sh ~/.cache/modbus-mqtt-bridge/ha-forky 2026.11.0 .venv/bin/python
 set -euo pipefail
 root=$1 version=$2 python=${3:-.venv/bin/python}
 work=$(mktemp -d "$root/tmp/check-XXXXXX")

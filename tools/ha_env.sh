@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # The Home Assistant installs `make test-ha` runs against, built once and kept under ROOT
-# (.ha/ in the work tree, ignored by git): a Debian testing ("forky") chroot made by
+# (make's HA_ROOT: ~/.cache/modbus-mqtt-bridge/ha-forky, shared by every clone on the machine): a Debian testing ("forky") chroot made by
 # debootstrap, which has both Pythons Home Assistant needs (3.13 for 2025.x: 2025.10 wants
 # at least 3.13.2; 3.14 for 2026.x: 2026.11 wants at least 3.14.2), with one venv per
 # version in ROOT/opt/ha-VERSION. Needs root (debootstrap, chroot) and Debian's apt.
 #
-#     tools/ha_env.sh .ha/forky 2025.10.4 2026.11.0
+#     tools/ha_env.sh ~/.cache/modbus-mqtt-bridge/ha-forky 2025.10.4 2026.11.0
 #
 # A version is installed once (ROOT/opt/ha-VERSION/.ready); delete ROOT to start over.
 set -euo pipefail

@@ -1,6 +1,6 @@
 """Fixtures of the Home Assistant tests: one Home Assistant per module, on the version
 ``HA_VERSION`` names, installed by ``tools/ha_env.sh`` in the chroot ``HA_ROOT``
-(default ``.ha/forky``). ``make test-ha`` sets them; without them the tests are skipped."""
+(default ``~/.cache/modbus-mqtt-bridge/ha-forky``). ``make test-ha`` sets them; without them the tests are skipped."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from tests.ha.homeassistant import HomeAssistant
 from tests.integration.mosquitto import Broker
 
 ROOT = Path(__file__).resolve().parents[2]
+HA_CACHE = Path.home() / ".cache" / "modbus-mqtt-bridge" / "ha-forky"  # make test-ha's HA_ROOT
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +29,7 @@ def ha_broker(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Broker]:
 @pytest.fixture(scope="module")
 def hass(ha_broker: Broker) -> Iterator[HomeAssistant]:
     version = os.environ.get("HA_VERSION", "")
-    root = Path(os.environ.get("HA_ROOT", ROOT / ".ha" / "forky"))
+    root = Path(os.environ.get("HA_ROOT", HA_CACHE))
     if not version or not (root / f"opt/ha-{version}/.ready").exists():
         pytest.skip("no Home Assistant installed: `make test-ha` installs and runs them")
     if shutil.which("chroot") is None or os.geteuid() != 0:

@@ -1,7 +1,7 @@
 """A real Home Assistant, headless, for the tests in tests/ha.
 
 ``tools/ha_env.sh`` installs each supported version in its own venv inside a Debian
-testing chroot (``.ha/forky/opt/ha-<version>``); ``HomeAssistant`` starts one of them
+testing chroot (``~/.cache/modbus-mqtt-bridge/ha-forky/opt/ha-<version>``); ``HomeAssistant`` starts one of them
 (``chroot ROOT /opt/ha-<version>/bin/hass -c DIR``) with a config folder in the chroot's
 /tmp, onboards a user over HTTP for an access token, sets up the MQTT integration through
 its config flow against the test's broker, and answers websocket commands (the entity and
