@@ -501,7 +501,7 @@ def test_a_state_link_is_for_a_write_only_select(fields: dict[str, Any], row: st
     entities = {"command": command | {"name": "Command", "state_from": link}, "state": DRIVE_STATE}
     with pytest.raises(ValidationError) as caught:
         make_mapping(entities)
-    assert list(format_validation_errors(caught.value))[0].startswith(row)
+    assert next(iter(format_validation_errors(caught.value))).startswith(row)
 
 
 # --- what is published ---------------------------------------------------------------------
