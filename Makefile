@@ -9,7 +9,7 @@ DEV    := $(VENV)/.installed-dev-$(SUM)
 RUN    := $(VENV)/.installed-demo-$(SUM)
 SOURCES := $(shell find bridge mappings -name '*.py' -o -name '*.yaml' -o -name py.typed)
 
-.PHONY: test test-other-python test-ha check lint demo docs clean
+.PHONY: test test-cluster test-other-python test-ha check lint demo docs clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,12 @@ PYTEST_ARGS ?= -n 4 --dist loadfile
 
 test: $(DEV)
 	$(BIN)/pytest $(PYTEST_ARGS)
+
+# Three sites on a 3-node NATS cluster, each node killed in turn (tests/integration/
+# test_cluster.py, marked `cluster`: a few minutes, so not in `make test`); skipped, saying
+# so, without nats-server.
+test-cluster: $(DEV)
+	$(BIN)/pytest -p no:xdist -p no:cacheprovider -m cluster -rsxX tests/integration/test_cluster.py
 
 # The stop races again on a newer Python (asyncio's cancellation changed in 3.12 and 3.13:
 # a fix that holds on one may not on the other), in a venv of its own. Found in pyenv by
