@@ -201,8 +201,9 @@ class Bridge:
                 await check_alone(client, self.topics, self.instance)
                 await client.announce()
                 self._polling()
-                await self._publish_info(client)
-                await self._publish_everything(client)  # values first: one round trip
+                # values, devices and info in one burst: one round trip, and no value waits
+                # for a slow broker's PUBACK of another message (a cluster storing them)
+                await self._publish_everything(client, with_info=True)
                 await self.discovery.publish(client, clear_stale=True)
                 group.create_task(self._publisher(client))
                 group.create_task(self._refresher(client))
@@ -345,15 +346,22 @@ class Bridge:
             return True
         return False
 
-    async def _publish_everything(self, client: MqttClient) -> None:
+    async def _publish_everything(self, client: MqttClient, *, with_info: bool = False) -> None:
+        """Every device's state and availability, the devices list (and ``bridge/info``),
+        sent at once and acknowledged together."""
         self._availability.clear()
         burst: list[Outgoing] = []
         for poller in self.engine.devices.values():
             self._device_messages(poller, set(published(poller.points)), burst)
+        burst.append((self.topics.bridge_devices, self._devices_list(), True))
+        if with_info:
+            burst.append((self.topics.bridge_info, self._info(), True))
         await client.publish_many(burst)
-        await self._publish_devices_list(client)
 
     async def _publish_devices_list(self, client: MqttClient) -> None:
+        await client.publish(self.topics.bridge_devices, self._devices_list(), retain=True)
+
+    def _devices_list(self) -> str:
         listing = [
             {
                 "id": p.device.id,
@@ -366,7 +374,7 @@ class Bridge:
             }
             for p in self.engine.devices.values()
         ]
-        await client.publish(self.topics.bridge_devices, compact(listing), retain=True)
+        return compact(listing)
 
     # --- commands ---------------------------------------------------------------------
 
@@ -480,8 +488,10 @@ class Bridge:
         self._wake.set()
 
     async def _publish_info(self, client: MqttClient) -> None:
-        info = json.dumps(self.management.info(), default=str)
-        await client.publish(self.topics.bridge_info, info, retain=True)
+        await client.publish(self.topics.bridge_info, self._info(), retain=True)
+
+    def _info(self) -> str:
+        return json.dumps(self.management.info(), default=str)
 
     def _error(self, device_id: str, key: str | None, value: object, error: str) -> None:
         payload = error_document(key, value, error)
