@@ -204,11 +204,9 @@ class Bridge:
                 # values, devices and info in one burst: one round trip, and no value waits
                 # for a slow broker's PUBACK of another message (a cluster storing them)
                 await self._publish_everything(client, with_info=True)
-                await self.discovery.publish(client, clear_stale=True)
-                group.create_task(self._publisher(client))
-                group.create_task(self._refresher(client))
-                group.create_task(self._home_assistant_returns(client))
-                group.create_task(self._health_reports(client))
+                # commands are served from here on; discovery (its stale-config sweep takes
+                # a second or more) goes out beside them, then what publishes changes
+                group.create_task(self._discovery_then_publishers(client, group))
                 async for message in client.messages():
                     self._handle(message)
                     if self._rival is not None:
@@ -217,6 +215,20 @@ class Bridge:
                         )
         except ExceptionGroup as failed:  # the MQTT error, so the reconnect loop sees it
             raise first_of(failed, MqttError) or failed from None
+
+    async def _discovery_then_publishers(
+        self, client: MqttClient, group: asyncio.TaskGroup
+    ) -> None:
+        """Discovery first (a change published before it would publish it a second
+        time), then the tasks that publish changes, refreshes, republishes and health."""
+        await self.discovery.publish(client, clear_stale=True)
+        for work in (
+            self._publisher,
+            self._refresher,
+            self._home_assistant_returns,
+            self._health_reports,
+        ):
+            group.create_task(work(client))
 
     def _farewell(self, client: MqttClient) -> list[tuple[str, str]]:
         """What a clean stop publishes before ``bridge/state`` goes offline: each device
