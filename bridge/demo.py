@@ -111,6 +111,14 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "a free one if taken)",
     )
     demo.add_argument(
+        "--web-port",
+        type=int,
+        default=DEFAULT_WEB_PORT,
+        metavar="PORT",
+        help=f"loopback TCP port of the web page (default {DEFAULT_WEB_PORT}, the add-on's "
+        "ingress port; a free one if taken; 0: any free one)",
+    )
+    demo.add_argument(
         "--local-broker",
         default=f"{LOOPBACK}:1883",
         metavar="HOST:PORT",
@@ -169,7 +177,7 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
         async with asyncio.timeout(10):
             await simulator.ready.wait()
         async with _broker(args.mqtt_url, args.local_broker, args.embedded_broker) as broker:
-            web_port = _free_port(DEFAULT_WEB_PORT)
+            web_port = _free_port(args.web_port)
             loaded = demo_config(broker, simulator.port, args, web_port)
             bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
             units = {seed.id: seed.unit for seed in SEEDS}

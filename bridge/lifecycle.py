@@ -16,6 +16,7 @@ import logging
 import os
 import signal
 import threading
+import time
 from collections.abc import Callable, Coroutine
 from concurrent.futures import Future, ThreadPoolExecutor
 from datetime import UTC, datetime
@@ -25,6 +26,7 @@ LOG_FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 LEVELS = ("debug", "info", "warning", "error")
 FORMATS = ("text", "json")
 T = TypeVar("T")
+SAME_STOP = 1.0  # seconds: a signal this soon after the first is the same stop, delivered twice
 _STANDARD = frozenset(vars(logging.makeLogRecord({}))) | {"message", "asctime"}
 
 
@@ -94,16 +96,21 @@ async def until_stopped(work: Coroutine[Any, Any, None]) -> None:
     """Run ``work`` until it ends or SIGINT/SIGTERM arrives (Ctrl-C, ``docker stop``).
 
     The first signal cancels ``work``, which ends within seconds (a write in flight is
-    finished, the farewell is bounded); a second one ends the process at once, logged."""
+    finished, the farewell is bounded); a second one, ``SAME_STOP`` seconds or more later
+    (sooner it is the first delivered twice: a terminal's Ctrl-C reaches a wrapper that
+    forwards it too), ends the process at once, logged."""
     task = asyncio.ensure_future(work)
     loop = asyncio.get_running_loop()
     loop.set_default_executor(_DaemonThreads())
-    signals: list[int] = []
+    first: list[float] = []  # when the first signal came
 
     def stop(signum: int) -> None:
-        signals.append(signum)
-        if len(signals) == 1:
+        now = time.monotonic()
+        if not first:
+            first.append(now)
             task.cancel()
+            return
+        if now - first[0] < SAME_STOP:  # one Ctrl-C delivered twice (a wrapper forwards it)
             return
         logging.getLogger(__name__).error(
             "a second stop signal: exiting now, without finishing the stop"

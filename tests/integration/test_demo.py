@@ -33,6 +33,7 @@ DEVICES = {seed.id for seed in SEEDS}
 @contextmanager
 def demo(*args: str, env: dict[str, str] | None = None) -> Iterator[subprocess.Popen[str]]:
     command = [sys.executable, "-m", "bridge.cli", "demo", "--plain", "--modbus-port", "0"]
+    command += ["--web-port", "0"]  # 8099 may be another test's (the add-on's ingress port)
     with subprocess.Popen(
         [*command, *args],
         stdout=subprocess.PIPE,

@@ -151,9 +151,12 @@ async def bridge_process(
 
 
 async def stopped_after(
-    process: asyncio.subprocess.Process, ready: Callable[[], Awaitable[None]]
+    process: asyncio.subprocess.Process,
+    ready: Callable[[], Awaitable[None]],
+    again: float | None = None,
 ) -> tuple[float, str]:
-    """SIGTERM once ``ready`` returns; seconds until the process ended, and its log."""
+    """SIGTERM once ``ready`` returns (and once more ``again`` seconds later); seconds until
+    the process ended, and its log."""
     assert process.stderr is not None
     log: list[bytes] = []
 
@@ -166,6 +169,9 @@ async def stopped_after(
     await ready()
     process.send_signal(signal.SIGTERM)
     started = time.monotonic()
+    if again is not None:
+        await asyncio.sleep(again)
+        process.send_signal(signal.SIGTERM)
     try:
         async with asyncio.timeout(STOP_WITHIN + 7):
             await process.wait()
@@ -284,7 +290,7 @@ def ready_for(state: str, broker: Broker, relay: Relay | None) -> Callable[[], A
             async with MqttClient(
                 MqttConfig(url=broker.url), will_topic="cmd/state", client_id="cmd"
             ) as client:
-                await client.publish("race/pump/set", '{"start_stop": true}')
+                await client.publish("race/pump/set", '{"start_stop": false}')
             await asyncio.sleep(1.0)  # the write went out; its answer is 30 s away
 
         return writing
@@ -300,3 +306,27 @@ def ready_for(state: str, broker: Broker, relay: Relay | None) -> Callable[[], A
             await asyncio.sleep(0.05)
 
     return online_then
+
+
+@pytest.mark.asyncio
+@pytest.mark.timeout(90)
+@pytest.mark.parametrize(
+    ("again", "code", "earliest", "latest"),
+    [
+        (0.0, 0, 1.5, STOP_WITHIN),  # one stop delivered twice: the write in flight finishes
+        (1.3, 128 + signal.SIGTERM, 1.2, 1.9),  # a second stop: at once, the write cut short
+    ],
+)
+async def test_a_second_signal_ends_the_stop_at_once_unless_it_is_the_first_twice(
+    mosquitto: Broker, tmp_path: Path, again: float, code: int, earliest: float, latest: float
+) -> None:
+    sim = simulator((1, "nastec_vasco"), write_latency=30.0)  # a stop waits FINISH_WRITE (2 s)
+    async with serving_tcp(sim) as port:
+        config = pump_config(mosquitto.url, port, timeout=40.0)
+        async with bridge_process(tmp_path, config) as process:
+            ready = ready_for("write in flight", mosquitto, None)
+            took, text = await stopped_after(process, ready, again=again)
+    assert process.returncode == code, text[-3000:]
+    assert earliest <= took <= latest, f"ended {took:.1f} s after the first signal:\n{text[-3000:]}"
+    said = "a second stop signal: exiting now" in text
+    assert said is (code != 0), text[-3000:]
