@@ -91,6 +91,7 @@ FAREWELL_TIMEOUT = 2.0  # seconds for the farewell messages and the goodbye: a s
 _FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
 STANDBY_RETRY = 10.0  # seconds between two looks at a base topic another bridge serves
+BACKLOG_SAID_AFTER = 30.0  # seconds a PUBACK took: the broker is slower than the bridge
 
 _log = logging.getLogger(__name__)
 
@@ -132,6 +133,10 @@ class _Connection(aiomqtt.Client):
 
     def __init__(self, hostname: str, port: int, **options: Any) -> None:
         super().__init__(hostname, port, **options)
+        # aiomqtt warns for every publish beyond ten unacknowledged ones: a burst of state
+        # is normal operation; a backlog is said by MqttClient.publish, once, with numbers
+        self.pending_calls_threshold = 2**62
+        self.backlog_said = False
         self.collectors: dict[str, asyncio.Queue[_Received]] = {}
         self.watchers: dict[str, asyncio.Queue[_Received]] = {}  # by exact topic, live too
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
@@ -459,6 +464,7 @@ class MqttClient:
             self.retained_topics.add(topic)
         elif retain:
             self.retained_topics.discard(topic)
+        sent = time.monotonic()
         try:
             await connection.publish(topic, payload, level, retain)
         except aiomqtt.MqttError as exc:
@@ -468,6 +474,15 @@ class MqttClient:
         _restore_lost_cancel()
         if connection.lost:  # woken by the loss, not acknowledged
             raise MqttDisconnectedError(f"publish to {topic[:200]}: connection lost")
+        waited = time.monotonic() - sent
+        if waited > BACKLOG_SAID_AFTER and not connection.backlog_said:
+            connection.backlog_said = True
+            _log.warning(
+                "MQTT: the broker is slower than the bridge: an acknowledgement took %.0f s, "
+                "%d publishes wait for theirs (said once a session)",
+                waited,
+                len(connection._pending_publishes),
+            )
 
     async def publish_many(self, messages: Iterable[tuple[str, str | bytes, bool]]) -> None:
         """Publish (topic, payload, retain) messages all at once and wait for every
