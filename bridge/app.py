@@ -155,12 +155,17 @@ class Bridge:
         topics = self.topics
         commands = (*topics.command_filters(), topics.bridge_requests)
         return [
+            # at QoS 0: a clean session keeps nothing across connections, so QoS 1 would
+            # add only a redelivery (a command twice is worse than once lost) and, on NATS,
+            # a JetStream consumer per subscription, which after a node failure took the
+            # SUBACK and then lost commands for seconds (tests/integration/test_cluster.py)
             Wanted(
                 "commands",
                 commands,
                 "commands and requests do not reach the bridge",
                 live_only=True,
                 level=logging.ERROR,
+                qos=0,
             ),
             Wanted("home_assistant", (topics.ha_status,), "Home Assistant's restarts go unnoticed"),
             Wanted(

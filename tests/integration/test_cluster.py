@@ -43,11 +43,14 @@ pytestmark = [
 @pytest.mark.parametrize("front", ["balancer", "url_list"])
 async def test_each_node_killed_in_turn(tmp_path: Path, front: str) -> None:
     lost: list[str] = []
+    cut = 0  # sites cut off, over the three failures
     async with running_sites(tmp_path, balancer=front == "balancer") as cluster:
         for node in range(3):
             failure = await cluster.fail(node)
             said = describe(failure)
-            assert failure.sites, f"node {node} cut no site off: {said}"
+            cut += len(failure.sites)
+            if not failure.sites:  # the balancer put every bridge on another node
+                assert front == "balancer", f"node {node} cut no site off: {said}"
             for site in failure.sites:
                 assert site.online is not None and site.live is not None, said
                 assert site.first_value is not None, said
@@ -58,5 +61,6 @@ async def test_each_node_killed_in_turn(tmp_path: Path, front: str) -> None:
                 if site.lost_commands():
                     lost.append(said)
             await cluster.restart(node)
+    assert cut, "no node failure cut a site off"
     if lost:  # NATS 2.9: see docs/brokers.md, "On a cluster"
         pytest.xfail(f"commands lost after the SUBACK on NATS {NATS}: {lost}")
