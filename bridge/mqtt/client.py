@@ -142,9 +142,13 @@ class _Connection(aiomqtt.Client):
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
         self.reached = False  # the socket (and TLS) connected and CONNECT was sent
 
-    def _client_connect(self) -> None:
-        super()._client_connect()
+    def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
+        """The socket (and TLS) connected; paho sends the CONNECT next. Marked here, in the
+        connecting thread before the CONNECT goes out, not once connect() returned: a
+        broker that closes at once on the CONNECT (RabbitMQ 3.x and MQTT 5) could be read
+        on the event loop before that, and was taken for a refused connection."""
         self.reached = True
+        super()._on_socket_open(client, userdata, sock)
 
     def _on_disconnect(self, *args: Any, **kwargs: Any) -> None:
         """A broker that closes the connection instead of answering the CONNECT (RabbitMQ
