@@ -3,16 +3,18 @@ apart, the presentation conventions (``convention``: names, manufacturer, enable
 defaults), which are warnings for a user's mapping.
 
 Each check returns rows ``entities.<key>.<field>: message``; ``check_mapping`` runs them all
-so a user sees every problem of a file at once.
+so a user sees every problem of a file at once. The checks read the parts of a mapping
+they need (``MappingParts``), not the model: ``mapping.Mapping`` runs them when it
+validates, so it sits above this module.
 """
 
 from __future__ import annotations
 
 import itertools
 import re
+import typing
 from collections.abc import Iterator
 from collections.abc import Mapping as AnyMapping
-from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
@@ -20,47 +22,30 @@ from bridge.core.address import to_wire
 from bridge.core.convention import convention_problems
 from bridge.core.entity import Access, DataType, Entity, StateLink, Table
 from bridge.core.hass import presentation_problems
-from bridge.core.protocol import Protocol
-
-if TYPE_CHECKING:
-    from bridge.core.mapping import Mapping
+from bridge.core.protocol import OptionSpec, Protocol, write_function
+from bridge.core.variant import option_combinations, when_matches
 
 KEY_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 RESERVED_KEYS = frozenset({"status", "alarms", "availability", "set", "get", "error"})
-_MAX_VARIANTS = 256
 _UNSIGNED_MAX = {DataType.U32: 0xFFFFFFFF, DataType.S32: 0xFFFFFFFF, DataType.F32: 0xFFFFFFFF}
 
 
-def when_matches(when: AnyMapping[str, str | list[str]], chosen: AnyMapping[str, str]) -> bool:
-    """True when every option named in ``when`` has one of the listed values."""
-    for option, wanted in when.items():
-        values = [wanted] if isinstance(wanted, str) else wanted
-        if chosen.get(option) not in values:
-            return False
-    return True
+class MappingParts(typing.Protocol):
+    """What the checks read of a mapping (``mapping.Mapping`` has all of it)."""
+
+    @property
+    def manufacturer(self) -> str: ...
+    @property
+    def protocol(self) -> Protocol: ...
+    @property
+    def options(self) -> AnyMapping[str, OptionSpec]: ...
+    @property
+    def status(self) -> str | None: ...
+    @property
+    def entities(self) -> AnyMapping[str, Entity]: ...
 
 
-def apply_variants(entity: Entity, chosen: AnyMapping[str, str]) -> Entity:
-    """The entity as configured: the first variant matching the option values applies."""
-    for variant in entity.variants:
-        if when_matches(variant.when, chosen):
-            return entity.with_variant(variant)
-    return entity
-
-
-def write_function(entity: Entity, protocol: Protocol) -> int:
-    """The function code a write of ``entity`` uses: explicit, else by table and width."""
-    if entity.write_function is not None:
-        return entity.write_function
-    supported = protocol.function_codes
-    if entity.table is Table.COIL:
-        return 5 if 5 in supported else 15
-    if entity.register_count == 1 and 6 in supported:
-        return 6
-    return 16
-
-
-def check_mapping(mapping: Mapping) -> list[str]:
+def check_mapping(mapping: MappingParts) -> list[str]:
     """Every cross-entity problem of ``mapping``, as ``location: message`` rows."""
     basis = [*_addresses(mapping), *_options(mapping)]
     rows = [*_keys(mapping), *basis]
@@ -73,17 +58,18 @@ def check_mapping(mapping: Mapping) -> list[str]:
     return rows
 
 
-def check_conventions(mapping: Mapping) -> list[str]:
+def check_conventions(mapping: MappingParts) -> list[str]:
     """The presentation conventions (``convention``) ``mapping`` breaks: errors for the
     shipped mappings (their tests), warnings for a user's own, which load all the same
     (a bridge upgrade does not stop a working site over a name). Names are compared per
     option combination, so none are checked while options or variants are invalid."""
     if any(_options(mapping)):
         return []
-    return list(convention_problems(mapping, _variants(mapping)))
+    combinations = option_combinations(mapping.options)
+    return list(convention_problems(mapping.manufacturer, mapping.entities, combinations))
 
 
-def _keys(mapping: Mapping) -> Iterator[str]:
+def _keys(mapping: MappingParts) -> Iterator[str]:
     for key in mapping.entities:
         if not KEY_PATTERN.match(key):
             yield f"entities.{key}: keys are snake_case (a-z, 0-9, _), starting with a letter"
@@ -91,7 +77,7 @@ def _keys(mapping: Mapping) -> Iterator[str]:
             yield f"entities.{key}: '{key}' is reserved in the state JSON (status, alarms)"
 
 
-def _addresses(mapping: Mapping) -> Iterator[str]:
+def _addresses(mapping: MappingParts) -> Iterator[str]:
     rule = mapping.protocol.addressing
     for key, e in mapping.entities.items():
         for name, printed in (("address", e.address), ("write_address", e.write_address)):
@@ -122,7 +108,7 @@ def _addresses(mapping: Mapping) -> Iterator[str]:
                 yield f"protocol.unlock.{name}: {exc}"
 
 
-def _options(mapping: Mapping) -> Iterator[str]:
+def _options(mapping: MappingParts) -> Iterator[str]:
     for name, spec in mapping.options.items():
         if spec.default not in spec.choices:
             yield f"options.{name}.default: {spec.default!r} is not one of {list(spec.choices)}"
@@ -139,7 +125,7 @@ def _options(mapping: Mapping) -> Iterator[str]:
 
 
 def _when_problems(
-    mapping: Mapping, location: str, when: AnyMapping[str, str | list[str]]
+    mapping: MappingParts, location: str, when: AnyMapping[str, str | list[str]]
 ) -> Iterator[str]:
     for option, wanted in when.items():
         if option not in mapping.options:
@@ -150,7 +136,7 @@ def _when_problems(
                 yield f"{location}.when: {option}={value!r} is not a choice"
 
 
-def _references(mapping: Mapping) -> Iterator[str]:
+def _references(mapping: MappingParts) -> Iterator[str]:
     entities = mapping.entities
     wants = {
         "unit_from": ("enum", "an enum entity"),
@@ -175,7 +161,7 @@ def _references(mapping: Mapping) -> Iterator[str]:
                 yield f"entities.{key}.{field_name}: {ref!r} is missing for some option values"
 
 
-def _toggle_and_requires(mapping: Mapping, key: str, e: Entity) -> Iterator[str]:
+def _toggle_and_requires(mapping: MappingParts, key: str, e: Entity) -> Iterator[str]:
     """``toggle_of`` names a readable boolean; ``requires`` readable entities, each with
     values of its kind (booleans for a boolean, labels for an enum)."""
     entities = mapping.entities
@@ -202,7 +188,9 @@ def _toggle_and_requires(mapping: Mapping, key: str, e: Entity) -> Iterator[str]
             yield f"entities.{key}.requires: {ref!r} must be a boolean or an enum"
 
 
-def _state_link_problems(mapping: Mapping, key: str, e: Entity, link: StateLink) -> Iterator[str]:
+def _state_link_problems(
+    mapping: MappingParts, key: str, e: Entity, link: StateLink
+) -> Iterator[str]:
     """``state_from`` names a readable enum present whenever the select is, by labels it
     has."""
     ref = link.entity
@@ -227,21 +215,16 @@ def _is_kind(entity: Entity, kind: str) -> bool:
 def _implies(
     when: AnyMapping[str, str | list[str]],
     other: AnyMapping[str, str | list[str]],
-    mapping: Mapping,
+    mapping: MappingParts,
 ) -> bool:
     return all(
-        when_matches(other, chosen) for chosen in _variants(mapping) if when_matches(when, chosen)
+        when_matches(other, chosen)
+        for chosen in option_combinations(mapping.options)
+        if when_matches(when, chosen)
     )
 
 
-def _variants(mapping: Mapping) -> Iterator[dict[str, str]]:
-    names = list(mapping.options)
-    choices = [mapping.options[name].choices for name in names]
-    for combo in itertools.islice(itertools.product(*choices), _MAX_VARIANTS):
-        yield dict(zip(names, combo, strict=True))
-
-
-def _function_codes(mapping: Mapping) -> Iterator[str]:
+def _function_codes(mapping: MappingParts) -> Iterator[str]:
     supported = mapping.protocol.function_codes
     for key, e in mapping.entities.items():
         if e.readable and e.table.read_function not in supported:
@@ -259,7 +242,7 @@ def _function_codes(mapping: Mapping) -> Iterator[str]:
                 yield f"entities.{key}.write_function: {code} writes one register only"
 
 
-def _sentinels(mapping: Mapping) -> Iterator[str]:
+def _sentinels(mapping: MappingParts) -> Iterator[str]:
     for key, e in mapping.entities.items():
         top = _UNSIGNED_MAX.get(e.data_type, 0xFFFF)
         for raw in e.sentinels:
@@ -267,7 +250,7 @@ def _sentinels(mapping: Mapping) -> Iterator[str]:
                 yield f"entities.{key}.sentinels: {raw} is outside the raw range 0..{top}"
 
 
-def _presentation(mapping: Mapping) -> Iterator[str]:
+def _presentation(mapping: MappingParts) -> Iterator[str]:
     for key, e in mapping.entities.items():
         for problem in presentation_problems(e):
             yield f"entities.{key}.ha: {problem}"
@@ -280,16 +263,16 @@ def _presentation(mapping: Mapping) -> Iterator[str]:
                 yield f"entities.{key}.variants.{index}.ha: {problem}"
 
 
-def _overlaps(mapping: Mapping) -> Iterator[str]:
+def _overlaps(mapping: MappingParts) -> Iterator[str]:
     seen: set[str] = set()
-    for chosen in _variants(mapping):
+    for chosen in option_combinations(mapping.options):
         for row in _overlaps_for(mapping, chosen):
             if row not in seen:
                 seen.add(row)
                 yield row
 
 
-def _overlaps_for(mapping: Mapping, chosen: dict[str, str]) -> Iterator[str]:
+def _overlaps_for(mapping: MappingParts, chosen: dict[str, str]) -> Iterator[str]:
     rule = mapping.protocol.addressing
     owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]] = {}
     for key, e in mapping.entities.items():
@@ -342,7 +325,7 @@ def _code_and_label(e1: Entity, s1: int, e2: Entity, s2: int) -> bool:
 
 
 def _reserved_hits(
-    mapping: Mapping, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
+    mapping: MappingParts, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
 ) -> Iterator[str]:
     rule = mapping.protocol.addressing
     for r in mapping.protocol.reserved:
@@ -353,7 +336,7 @@ def _reserved_hits(
 
 
 def _segment_crossings(
-    mapping: Mapping, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
+    mapping: MappingParts, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
 ) -> Iterator[str]:
     rule = mapping.protocol.addressing
     bounds = [

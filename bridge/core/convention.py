@@ -20,12 +20,10 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Iterator
-from typing import TYPE_CHECKING
+from collections.abc import Mapping as AnyMapping
 
 from bridge.core.entity import Entity
-
-if TYPE_CHECKING:
-    from bridge.core.mapping import Mapping
+from bridge.core.variant import active_entities
 
 # Words a name may write in capitals: abbreviations people read as such. Add one here on
 # purpose; a manual's habit of printing parameter names in capitals is not a reason.
@@ -68,22 +66,24 @@ _WORD = re.compile(r"\w*_\w*|[^\W_]+")  # words; a word with "_" is one word
 _PLACEHOLDER = re.compile(r"\b(unknown|unidentified|unnamed|not named|n/a|tbd)\b|[()?]", re.I)
 
 
-def convention_problems(mapping: Mapping, combinations: Iterable[dict[str, str]]) -> Iterator[str]:
-    """Every break of the presentation rules in ``mapping`` (whose addresses, options and
-    variants are valid); names are compared among the entities present together, for
-    each of the option ``combinations``."""
-    if _PLACEHOLDER.search(mapping.manufacturer):
+def convention_problems(
+    manufacturer: str, entities: AnyMapping[str, Entity], combinations: Iterable[dict[str, str]]
+) -> Iterator[str]:
+    """Every break of the presentation rules in a mapping's ``manufacturer`` and
+    ``entities`` (whose addresses, options and variants are valid); names are compared
+    among the entities present together, for each of the option ``combinations``."""
+    if _PLACEHOLDER.search(manufacturer):
         yield (
-            f"manufacturer: {mapping.manufacturer!r} does not read as a company's name "
+            f"manufacturer: {manufacturer!r} does not read as a company's name "
             "(write 'Generic' when the manual names none, and what you know in a comment)"
         )
-    for key, entity in mapping.entities.items():
+    for key, entity in entities.items():
         for location, shown in _presented(key, entity):
             yield from (f"{location}.name: {p}" for p in name_problems(shown.name))
             problem = default_problem(shown)
             if problem is not None:
                 yield f"{location}.ha.enabled: {problem}"
-    yield from _shared_names(mapping, combinations)
+    yield from _shared_names(entities, combinations)
 
 
 def name_problems(name: str) -> list[str]:
@@ -123,12 +123,15 @@ def _presented(key: str, entity: Entity) -> Iterator[tuple[str, Entity]]:
         yield f"entities.{key}.variants.{index}", entity.with_variant(variant)
 
 
-def _shared_names(mapping: Mapping, combinations: Iterable[dict[str, str]]) -> Iterator[str]:
-    """Two entities a device shows at once under one name."""
+def _shared_names(
+    entities: AnyMapping[str, Entity], combinations: Iterable[dict[str, str]]
+) -> Iterator[str]:
+    """Two entities a device shows at once under one name (``combinations`` name every
+    option, so no default is needed)."""
     seen: set[str] = set()
     for chosen in combinations:
         owners: dict[str, str] = {}
-        for key, entity in mapping.active(chosen).items():
+        for key, entity in active_entities(entities, chosen).items():
             first = owners.setdefault(entity.name.casefold(), key)
             row = f"entities.{key}.name: {entity.name!r} is also the name of {first!r}"
             if first != key and row not in seen:

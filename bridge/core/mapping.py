@@ -4,6 +4,9 @@
 file, the entity key and the field. ``Mapping.points(options)`` resolves the entities
 active for a device's option values into ``Point`` objects with wire addresses, which
 the codec and the planner work on.
+
+A ``Mapping`` runs the checks across entities (``checks``) when it validates; which
+entities a device has for its option values, and as which variant, is ``variant``'s.
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ from bridge.core import checks
 from bridge.core.address import format_address, to_wire
 from bridge.core.convention import name_problems
 from bridge.core.entity import Entity, Table
-from bridge.core.protocol import OptionSpec, Protocol
+from bridge.core.protocol import OptionSpec, Protocol, write_function
+from bridge.core.variant import active_entities
 from bridge.core.yaml_source import parse_yaml
 from bridge.errors import MappingError
 
@@ -64,12 +68,7 @@ class Mapping(BaseModel):
 
     def active(self, options: dict[str, str] | None = None) -> dict[str, Entity]:
         """Entities present for these option values (unset options take their default)."""
-        chosen = self.default_options() | (options or {})
-        return {
-            key: checks.apply_variants(entity, chosen)
-            for key, entity in self.entities.items()
-            if checks.when_matches(entity.when, chosen)
-        }
+        return active_entities(self.entities, self.default_options() | (options or {}))
 
     def memo(self, key: object, build: Callable[[], T]) -> T:
         """What ``build`` returns, built once per mapping (many devices of one model share
@@ -158,7 +157,7 @@ def _plain_point(key: str, entity: Entity, protocol: Protocol) -> Point:
         entity=entity,
         address=address,
         write_address=address,
-        write_function=checks.write_function(entity, protocol) if entity.writable else None,
+        write_function=write_function(entity, protocol) if entity.writable else None,
         coil_on_value=protocol.coil_on_value,
     )
 

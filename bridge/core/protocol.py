@@ -1,4 +1,5 @@
-"""A device's Modbus protocol rules, declared in the header of its mapping file."""
+"""A device's Modbus protocol rules, declared in the header of its mapping file, and the
+function code a write uses under them (``write_function``)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from bridge.core.address import Addressing, PrintedAddress
 from bridge.core.duration import Duration
-from bridge.core.entity import Table
+from bridge.core.entity import Entity, Table
 
 ALL_FUNCTION_CODES = (1, 2, 3, 4, 5, 6, 15, 16)
 
@@ -115,6 +116,18 @@ class Protocol(BaseModel):
     reserved: tuple[Reserved, ...] = ()
     serial: SerialDefaults = SerialDefaults()
     transports: tuple[Literal["rtu", "ascii", "tcp", "rtu-over-tcp"], ...] = ("rtu",)
+
+
+def write_function(entity: Entity, protocol: Protocol) -> int:
+    """The function code a write of ``entity`` uses: explicit, else by table and width."""
+    if entity.write_function is not None:
+        return entity.write_function
+    supported = protocol.function_codes
+    if entity.table is Table.COIL:
+        return 5 if 5 in supported else 15
+    if entity.register_count == 1 and 6 in supported:
+        return 6
+    return 16
 
 
 class OptionSpec(BaseModel):
