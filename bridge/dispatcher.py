@@ -29,7 +29,7 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.core.commands import RecentMessages, check_size, parse_get, parse_set
+from bridge.core.commands import Command, RecentMessages, check_size, parse_get, parse_set
 from bridge.core.topics import Action, CommandTopic
 from bridge.errors import BridgeError, CommandRejectedError, ValueRejectedError
 from bridge.modbus.engine import Engine
@@ -55,16 +55,6 @@ class DispatchCounters:
     commands: int = 0  # /set messages accepted for execution
     refused: int = 0  # refused before execution: retained, too large, malformed, busy
     coalesced: int = 0  # /get messages that joined a read already waiting
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    """The keys and values of one /set, and the time it stops being worth executing."""
-
-    device_id: str
-    items: dict[str, object]
-    received: float
-    expires: float
 
 
 class Dispatcher:
@@ -109,9 +99,8 @@ class Dispatcher:
         except ValueRejectedError as exc:
             self._refuse(device_id, key, message.payload, str(exc))
             return
-        expiry = self.expiry if message.expiry is None else min(self.expiry, message.expiry)
         arrived = now if message.received is None else min(now, message.received)
-        self._set(Command(device_id, items, arrived, arrived + expiry))  # from its arrival
+        self._set(Command.arrived(device_id, items, arrived, self.expiry, message.expiry))
 
     def _refuse(self, device_id: str, key: str | None, value: object, reason: str) -> None:
         self.counters.refused += 1
@@ -149,7 +138,7 @@ class Dispatcher:
             return
         async with self._locks.setdefault(device_id, asyncio.Lock()):
             poller = self.engine.devices[device_id]  # now: a mapping reload may have replaced it
-            if time.monotonic() > command.expires:
+            if command.expired(time.monotonic()):
                 poller.writes.expired += 1
                 self._fail(command, "expired: not executed within the command expiry")
                 return

@@ -28,16 +28,40 @@ MAX_KEYS = 100  # keys of one /set (a device has up to about 200 entities, few w
 
 @dataclass(frozen=True, slots=True)
 class Command:
-    """One write asked for over MQTT, with the time it stops being worth executing."""
+    """One /set: the keys and values written together (all or nothing) to one device,
+    and the time (monotonic seconds) it stops being worth executing."""
 
     device_id: str
-    key: str
-    value: object
+    items: dict[str, object]
     received: float
     expires: float
 
+    @classmethod
+    def arrived(
+        cls,
+        device_id: str,
+        items: dict[str, object],
+        received: float,
+        expiry: float,
+        message_expiry: float | None = None,
+    ) -> Command:
+        """A /set that arrived at ``received``, in time for ``expiry`` seconds (the
+        bridge's ``mqtt.command_expiry``) or the publisher's MQTT 5 message expiry,
+        whichever ends first; both counted from its arrival."""
+        lifetime = expiry if message_expiry is None else min(expiry, message_expiry)
+        return cls(device_id, items, received, received + lifetime)
+
     def expired(self, now: float) -> bool:
-        return now > self.expires
+        """True once ``now`` is past the expiry (``past_deadline``)."""
+        return past_deadline(self.expires, now)
+
+
+def past_deadline(deadline: float | None, now: float) -> bool:
+    """The rule of a command's time: True once ``now`` is beyond ``deadline``; at the
+    deadline itself it is still in time; with no deadline (None) never. The dispatcher
+    applies it before a command runs (``Command.expired``), the scheduler right before
+    the command's first frame is sent (the deadline it was given)."""
+    return deadline is not None and now > deadline
 
 
 def parse_set(payload: bytes, key: str | None) -> dict[str, object]:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
-from bridge.core.commands import Command, RecentMessages, parse_get, parse_set
+from bridge.core.commands import Command, RecentMessages, parse_get, parse_set, past_deadline
 from bridge.core.state import active_alarms, plain_payload, state_document
 from bridge.core.topics import Action, CommandTopic, Topics
 from bridge.errors import ValueRejectedError
@@ -96,9 +97,51 @@ def test_parse_get() -> None:
 
 
 def test_commands_expire() -> None:
-    command = Command("pump", "set_value", 4.5, received=10.0, expires=15.0)
+    command = Command("pump", {"set_value": 4.5}, received=10.0, expires=15.0)
     assert not command.expired(15.0)
     assert command.expired(15.1)
+
+
+def test_a_command_is_in_time_at_its_expiry_and_expired_just_after() -> None:
+    command = Command("pump", {"set_value": 4.5}, received=10.0, expires=15.0)
+    assert not command.expired(10.0)  # the clock is passed in: no wall time is read
+    assert not command.expired(15.0)
+    assert command.expired(math.nextafter(15.0, math.inf))
+
+
+@pytest.mark.parametrize(
+    ("expiry", "message_expiry", "expires"),
+    [
+        (5.0, None, 105.0),  # no message expiry: the bridge's command_expiry
+        (5.0, 2.0, 102.0),  # the publisher's is sooner: it wins
+        (5.0, 60.0, 105.0),  # the publisher's is later: the bridge's still holds
+        (5.0, 5.0, 105.0),
+        (5.0, 0.0, 100.0),  # no time left: in time at its arrival only
+    ],
+)
+def test_a_command_is_in_time_from_its_arrival(
+    expiry: float, message_expiry: float | None, expires: float
+) -> None:
+    items: dict[str, object] = {"start": "PRESS", "speed": 40}
+    command = Command.arrived("pump", items, 100.0, expiry, message_expiry)
+    assert command == Command("pump", items, received=100.0, expires=expires)
+    assert not command.expired(expires)
+    assert command.expired(math.nextafter(expires, math.inf))
+
+
+@pytest.mark.parametrize(
+    ("deadline", "now", "past"),
+    [
+        (None, 0.0, False),  # no deadline (a poll, a raw write): never past
+        (None, 1e12, False),
+        (15.0, 14.9, False),
+        (15.0, 15.0, False),  # at the deadline: still in time
+        (15.0, math.nextafter(15.0, math.inf), True),
+        (15.0, 16.0, True),
+    ],
+)
+def test_past_deadline(deadline: float | None, now: float, past: bool) -> None:
+    assert past_deadline(deadline, now) is past
 
 
 def test_redelivered_duplicates_are_recognised() -> None:
