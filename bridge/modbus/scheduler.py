@@ -40,6 +40,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
+from bridge.core.commands import past_deadline
 from bridge.core.health import exception_meaning
 from bridge.core.protocol import Protocol
 from bridge.core.request import Read, Write, WriteSequence
@@ -309,7 +310,7 @@ class BusScheduler:
         is checked right before the frame goes out (after the port is open)."""
         try:
             await self._ensure_open()
-            if first and job.deadline is not None and time.monotonic() > job.deadline:
+            if first and past_deadline(job.deadline, time.monotonic()):
                 raise _expired(job)
             job.sent = True
             return await self._transaction(job, request)
