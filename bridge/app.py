@@ -60,7 +60,7 @@ from bridge.mqtt import (
     MqttPublishError,
     run_with_reconnect,
 )
-from bridge.mqtt.client import STANDBY_RETRY
+from bridge.mqtt.reconnect import STANDBY_RETRY
 from bridge.standby import check_alone
 from bridge.subscriptions import Subscriptions, Wanted
 from bridge.web import WebFeed, serve_web
