@@ -30,7 +30,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the cluster of the tests
 
-from bridge.mqtt import client as client_module
+from bridge.mqtt import session as session_module
 from tests.integration.brokers import NatsBroker
 from tests.integration.cluster_sites import Failure, running_sites
 
@@ -40,7 +40,7 @@ FIGURES = ("detected", "connected", "online", "first value", "live")
 def follow_connects() -> list[tuple[str, float, float, bool]]:
     """(will topic, start, end, ok) of every connect attempt of every bridge."""
     attempts: list[tuple[str, float, float, bool]] = []
-    opened = client_module.MqttClient._open
+    opened = session_module.MqttClient._open
 
     async def _open(self: Any, *args: Any) -> Any:
         started = time.monotonic()
@@ -52,7 +52,7 @@ def follow_connects() -> list[tuple[str, float, float, bool]]:
         attempts.append((self._will_topic, started, time.monotonic(), True))
         return connection
 
-    client_module.MqttClient._open = _open  # type: ignore[method-assign]
+    session_module.MqttClient._open = _open  # type: ignore[method-assign]
     return attempts
 
 

@@ -1,25 +1,41 @@
 """The bridge: the Modbus engine and the MQTT session wired together.
 
 ``Bridge(loaded).run()`` runs one TaskGroup: the engine (every bus and device) and the
-MQTT session, which reconnects by itself. Every (re)connect subscribes to the command
-topics, clears retained discovery configs the bridge no longer produces, publishes
-discovery and the whole state. Pollers report changes; a publisher sends the device's
-JSON, the changed plain values and its availability. Commands go through the dispatcher
+MQTT session, which reconnects by itself (bridge/mqtt/reconnect.py). Every (re)connect
+subscribes to the command topics, clears retained discovery configs the bridge no longer
+produces, publishes discovery and the whole state. Commands go through the dispatcher
 (bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
 anything refused or failing goes to ``<base>/<device>/error``. Handling one message never
 waits for a device or a broker round trip, and no exception from one message leaves the
-message loop. Home Assistant's ``online`` asks for one republish, half a second later
-(however many arrive meanwhile). At most ``MAX_REQUESTS`` management requests run at a time.
-A subscription the broker refuses (an ACL) is logged, and the session goes on
-publishing without it. Each session publishes ``<base>/bridge/health`` every
-``bridge.health_interval``; the optional metrics endpoint serves the same counters for the
-whole run, and the optional web page (bridge/web) shows the same values, health and
-refusals, fed by ``feed``. A clean stop (Ctrl-C, SIGTERM) sets every device's availability
-``offline`` before ``bridge/state`` goes ``offline``; the demo (``remove_on_stop``) empties
-every retained message it published. One bridge per base topic: before a connection says
-``online``, ``_alone`` checks that no other live bridge serves the topic (else this one
-stands by without polling: bridge/core/instance.py), and a bridge that comes up beside
-this one later is told apart by the ``bridge/info`` it publishes.
+message loop. At most ``MAX_REQUESTS`` management requests run at a time. A subscription
+the broker refuses (an ACL) is logged, and the session goes on publishing without it.
+Each session publishes ``<base>/bridge/health`` every ``bridge.health_interval``; the
+optional metrics endpoint serves the same counters for the whole run, and the optional
+web page (bridge/web) shows the same values, health and refusals, fed by ``feed``. A
+clean stop (Ctrl-C, SIGTERM) sets every device's availability ``offline`` before
+``bridge/state`` goes ``offline``; the demo (``remove_on_stop``) empties every retained
+message it published. One bridge per base topic: before a connection says ``online``,
+``check_alone`` (bridge/standby.py) checks that no other live bridge serves the topic
+(else this one stands by without polling: bridge/core/instance.py), and a bridge that
+comes up beside this one later is told apart by the ``bridge/info`` it publishes.
+
+The wiring: the parts call back into the bridge, and every callback is named in
+``__init__`` and ``run``:
+
+- a poll: ``Engine(on_update=_on_update)`` -> ``state.changed`` (bridge/state_publisher.py:
+  dirty keys, then the device's JSON, plain values and availability, on change only) and
+  ``feed.changed`` (the web page);
+- a ``/set``: ``client.messages()`` in ``_session`` -> ``_handle`` -> ``_route`` ->
+  ``dispatcher.handle``, which runs the write with ``spawn=_spawn`` (in the bridge's
+  TaskGroup) and reports a refusal or failure with ``error=_error`` (-> ``state.queue``,
+  the outbox, and the web page); the values the device acknowledged and read back come
+  back as a poll's do, through ``_on_update``; a ``/get`` is read, then published with
+  ``read=state.again`` (its state, changed or not);
+- a management request: ``_route`` -> ``_request`` -> ``_answer`` -> ``_respond`` (->
+  ``state.queue``); a reload: ``Management(on_reload=_reloaded)`` -> ``state.reloaded``;
+- the MQTT side: ``run_with_reconnect(session=_session, on_state=_mqtt_is)``; a session's
+  publishing tasks are ``state.run``, ``state.refresh``, ``state.home_assistant_returns``
+  and ``_health_reports``.
 """
 
 from __future__ import annotations
@@ -27,10 +43,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
-import json
 import logging
 import time
-from collections import deque
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -44,34 +58,29 @@ from bridge.core.discovery import (
 from bridge.core.health_report import HealthReporter, Snapshot
 from bridge.core.instance import Instance, instance_of, taken_message
 from bridge.core.management_request import response
-from bridge.core.state import compact, plain_payload, published, state_document
+from bridge.core.state import compact
 from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
 from bridge.errors import ValueRejectedError, first_of
 from bridge.management import Management
 from bridge.modbus.engine import Engine
-from bridge.modbus.poller import DevicePoller, DeviceUpdate
+from bridge.modbus.poller import DeviceUpdate
 from bridge.mqtt import (
     BaseTopicTakenError,
     Message,
     MqttClient,
     MqttError,
-    MqttPublishError,
     run_with_reconnect,
 )
-from bridge.mqtt.client import STANDBY_RETRY
+from bridge.mqtt.reconnect import STANDBY_RETRY
 from bridge.standby import check_alone
+from bridge.state_publisher import StatePublisher
 from bridge.subscriptions import Subscriptions, Wanted
 from bridge.web import WebFeed, serve_web
 
 log = logging.getLogger(__name__)
-Outgoing = tuple[str, str, bool]  # topic, payload, retain
-OUTBOX = 200  # non-retained messages kept while the broker is away
-HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
-HA_REPUBLISH_GAP = 30.0  # seconds at least between two republishes Home Assistant asks for
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
-STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
 
 
 class Bridge:
@@ -87,32 +96,11 @@ class Bridge:
         self.mqtt = config.mqtt
         self.topics = Topics(config.mqtt.base_topic, config.mqtt.discovery_prefix)
         self.origin = Origin(sw_version=__version__)
+        self.feed = WebFeed()  # what the web page watches: value changes, refusals
+        self.instance = Instance.new(time.time())
+        # the callbacks, wired here and nowhere else (module docstring: the wiring)
         self.engine = Engine(loaded, self._on_update)
         self.discovery = DiscoveryPublisher(loaded, self.engine, self.topics, self.origin)
-        self._wake = asyncio.Event()
-        self._dirty: dict[str, set[str]] = {}
-        self._outbox: deque[Publish] = deque(maxlen=OUTBOX)
-        self.dropped = 0  # messages the full outbox dropped (counted in bridge/health)
-        self._availability: dict[str, str] = {}
-        self.feed = WebFeed()  # what the web page watches: value changes, refusals
-        self.dispatcher = Dispatcher(
-            self.engine,
-            self.mqtt.command_expiry,
-            spawn=self._spawn,
-            error=self._error,
-            read=self._publish_state,
-        )
-        self._requests = 0  # management requests running
-        self._group: asyncio.TaskGroup | None = None
-        self._health = HealthReporter()  # rates since the previous report
-        # "online" while connected, "offline" between, "standby" while another bridge
-        # serves the base topic
-        self.mqtt_state = "connecting"
-        self.instance = Instance.new(time.time())
-        self._rival: Instance | None = None  # a bridge that came up beside this one
-        self._info_due = False  # bridge/info again: another bridge overwrote it
-        self._engine: asyncio.Task[None] | None = None
-        self.subscriptions = Subscriptions(self._wanted(), max(1, self.mqtt.qos))
         self.management = Management(
             loaded,
             self.engine,
@@ -120,10 +108,32 @@ class Bridge:
             mqtt_state=lambda: self.mqtt_state,
             instance=self.instance,
         )
-        self._republish = False  # after a mapping reload: info, discovery and state
+        self.state = StatePublisher(
+            self.engine,
+            self.topics,
+            self.mqtt,
+            self.discovery,
+            info=self.management.info,
+            spawn=self._spawn,
+        )
+        self.dispatcher = Dispatcher(
+            self.engine,
+            self.mqtt.command_expiry,
+            spawn=self._spawn,
+            error=self._error,
+            read=self.state.again,  # a /get: its state, changed or not
+        )
+        self._requests = 0  # management requests running
+        self._group: asyncio.TaskGroup | None = None
+        self._health = HealthReporter()  # rates since the previous report
+        # "online" while connected, "offline" between, "standby" while another bridge
+        # serves the base topic
+        self.mqtt_state = "connecting"
+        self._rival: Instance | None = None  # a bridge that came up beside this one
+        self._engine: asyncio.Task[None] | None = None
+        self.subscriptions = Subscriptions(self._wanted(), max(1, self.mqtt.qos))
         # requests beyond the management API, by command (the demo's "demo/fault")
         self.extra_requests: dict[str, Callable[[bytes], Awaitable[str]]] = {}
-        self._ha_online = asyncio.Event()  # Home Assistant said online: republish soon
 
     # --- running ----------------------------------------------------------------------
 
@@ -208,7 +218,7 @@ class Bridge:
                 self._polling()
                 # values, devices and info in one burst: one round trip, and no value waits
                 # for a slow broker's PUBACK of another message (a cluster storing them)
-                await self._publish_everything(client, with_info=True)
+                await self.state.everything(client, with_info=True)
                 # commands are served from here on; discovery (its stale-config sweep takes
                 # a second or more) goes out beside them, then what publishes changes
                 group.create_task(self._discovery_then_publishers(client, group))
@@ -228,9 +238,9 @@ class Bridge:
         time), then the tasks that publish changes, refreshes, republishes and health."""
         await self.discovery.publish(client, clear_stale=True)
         for work in (
-            self._publisher,
-            self._refresher,
-            self._home_assistant_returns,
+            self.state.run,
+            self.state.refresh,
+            self.state.home_assistant_returns,
             self._health_reports,
         ):
             group.create_task(work(client))
@@ -248,32 +258,6 @@ class Bridge:
             t for t in left if not t.startswith(prefix)
         ]
         return [(topic, "") for topic in ordered]
-
-    async def _publisher(self, client: MqttClient) -> None:
-        while True:
-            await self._wake.wait()
-            self._wake.clear()
-            await self._flush(client)
-
-    async def _home_assistant_returns(self, client: MqttClient) -> None:
-        """Discovery and state again after Home Assistant says ``online``: ``HA_SETTLE``
-        seconds after it, however many come, and at most once per ``HA_REPUBLISH_GAP``
-        (anyone may publish ``online``: a sustained flood must not keep the bridge
-        republishing everything)."""
-        last = -HA_REPUBLISH_GAP
-        while True:
-            await self._ha_online.wait()
-            await asyncio.sleep(max(HA_SETTLE, last + HA_REPUBLISH_GAP - time.monotonic()))
-            self._ha_online.clear()
-            last = time.monotonic()
-            log.info("Home Assistant is online: publishing discovery and state again")
-            await self.discovery.publish(client)
-            await self._publish_everything(client)
-
-    async def _refresher(self, client: MqttClient) -> None:
-        while True:
-            await asyncio.sleep(self.mqtt.state_refresh)
-            await self._publish_everything(client)
 
     async def _health_reports(self, client: MqttClient) -> None:
         """``<base>/bridge/health`` now and every ``health_interval``, retained: Home
@@ -294,104 +278,18 @@ class Bridge:
                 "commands": counters.commands,
                 "refused": counters.refused,
                 "coalesced": counters.coalesced,
-                "dropped": self.dropped,
+                "dropped": self.state.dropped,
             }
             await client.publish(self.topics.bridge_health, compact(report), retain=True)
             await asyncio.sleep(interval)
 
-    # --- state ------------------------------------------------------------------------
+    # --- a poll ---------------------------------------------------------------------
 
     def _on_update(self, update: DeviceUpdate) -> None:
-        self._dirty.setdefault(update.device_id, set()).update(update.changed)
-        self._wake.set()
+        """The engine's report of a poll that changed values: to the broker
+        (bridge/state_publisher.py) and to the web page."""
+        self.state.changed(update)
         self.feed.changed(update.device_id, update.changed)
-
-    async def _flush(self, client: MqttClient) -> None:
-        if self._info_due:
-            self._info_due = False
-            await self._publish_info(client)
-        if self._republish:  # after a mapping reload: new entities, new discovery
-            self._republish = False
-            self._ha_online.clear()
-            await self._publish_info(client)
-            await self.discovery.publish(client, clear_stale=True)
-            await self._publish_everything(client)
-        dirty, self._dirty = self._dirty, {}
-        burst: list[Outgoing] = []
-        devices_changed = False
-        for device_id, keys in dirty.items():
-            poller = self.engine.devices[device_id]
-            due = self.discovery.due(poller, keys)  # first: the payload admits the values
-            if due and await self.discovery.publish(client, only=device_id):
-                self._spawn(self._state_again(device_id))
-            devices_changed |= self._device_messages(poller, keys, burst)
-        await client.publish_many(burst)
-        if devices_changed:
-            await self._publish_devices_list(client)
-        while self._outbox:
-            message = self._outbox.popleft()
-            try:
-                await client.publish(message.topic, message.payload, retain=message.retain)
-            except MqttPublishError as exc:
-                log.warning("%s", exc)
-
-    def _device_messages(self, poller: DevicePoller, keys: set[str], burst: list[Outgoing]) -> bool:
-        """Add a device's JSON, changed plain values and availability (when it changed) to
-        ``burst``; True if the availability changed."""
-        device_id = poller.device.id
-        topics = self.topics
-        output = self.mqtt.output
-        if poller.values and output != "values":
-            document = state_document(poller.mapping, poller.points, poller.values)
-            burst.append((topics.device(device_id), compact(document), True))
-        if output != "json":
-            for key in sorted(keys & set(published(poller.points))):
-                payload = plain_payload(poller.values.get(key))
-                burst.append((topics.value(device_id, key), payload, True))
-        # online once it answered and its values are out, offline once it stopped
-        # answering; before its first poll settled, nothing (a retained "offline" for a
-        # device that is only being asked would be a false alarm)
-        if poller.health.online is False:
-            availability = "offline"
-        elif poller.health.online and poller.values:
-            availability = "online"
-        else:
-            return False
-        if self._availability.get(device_id) != availability:
-            self._availability[device_id] = availability
-            burst.append((topics.availability(device_id), availability, True))
-            return True
-        return False
-
-    async def _publish_everything(self, client: MqttClient, *, with_info: bool = False) -> None:
-        """Every device's state and availability, the devices list (and ``bridge/info``),
-        sent at once and acknowledged together."""
-        self._availability.clear()
-        burst: list[Outgoing] = []
-        for poller in self.engine.devices.values():
-            self._device_messages(poller, set(published(poller.points)), burst)
-        burst.append((self.topics.bridge_devices, self._devices_list(), True))
-        if with_info:
-            burst.append((self.topics.bridge_info, self._info(), True))
-        await client.publish_many(burst)
-
-    async def _publish_devices_list(self, client: MqttClient) -> None:
-        await client.publish(self.topics.bridge_devices, self._devices_list(), retain=True)
-
-    def _devices_list(self) -> str:
-        listing = [
-            {
-                "id": p.device.id,
-                "name": p.device.display_name,
-                "mapping": p.device.mapping,
-                "model": f"{p.mapping.manufacturer} {p.mapping.model}",
-                "bus": p.device.bus,
-                "unit": p.device.unit,
-                "state": _availability_word(p.health.online),
-            }
-            for p in self.engine.devices.values()
-        ]
-        return compact(listing)
 
     # --- commands ---------------------------------------------------------------------
 
@@ -409,7 +307,7 @@ class Bridge:
             return
         if message.topic == self.topics.ha_status:
             if message.payload.strip() == b"online":
-                self._ha_online.set()
+                self.state.home_assistant_online()
             return
         if message.topic == self.topics.bridge_info:
             self._another_info(message)
@@ -433,8 +331,7 @@ class Bridge:
                 self.mqtt.base_topic,
                 other.describe(),
             )
-            self._info_due = True
-            self._wake.set()
+            self.state.info_again()
 
     def _spawn(self, work: Any, failed: Callable[[str], None] | None = None) -> None:
         """Run a command's or request's work in the bridge's TaskGroup; whatever it raises
@@ -442,19 +339,6 @@ class Bridge:
         if self._group is None:
             raise RuntimeError("the bridge is not running")
         self._group.create_task(_guarded(work, failed))
-
-    async def _state_again(self, device_id: str) -> None:
-        """Publish a device's state once more after Home Assistant took its new discovery:
-        it applies a changed payload in the background, and a state that arrived first (a
-        code now in the options, a number now in range) would have been dropped."""
-        await asyncio.sleep(STATE_AFTER_DISCOVERY)
-        self._publish_state(device_id)
-
-    def _publish_state(self, device_id: str) -> None:
-        """Have the publisher send the device's state (changed or not): after a read on
-        request, or after Home Assistant took a new discovery payload."""
-        self._dirty.setdefault(device_id, set())
-        self._wake.set()
 
     # --- management -------------------------------------------------------------------
 
@@ -486,34 +370,16 @@ class Bridge:
         self._respond(command, answer)
 
     def _respond(self, command: str, answer: str) -> None:
-        self._queue(Publish(self.topics.bridge_response(command), answer, retain=False))
-
-    def _queue(self, message: Publish) -> None:
-        """Queue a non-retained message; when the outbox is full the oldest is dropped
-        (and counted)."""
-        if len(self._outbox) == self._outbox.maxlen:
-            self.dropped += 1
-        self._outbox.append(message)
-        self._wake.set()
+        self.state.queue(Publish(self.topics.bridge_response(command), answer, retain=False))
 
     async def _reloaded(self, device_ids: list[str]) -> None:
         log.info("mappings reloaded for %s", ", ".join(device_ids))
-        for device_id in device_ids:
-            self.discovery.forget(device_id)
-            self._dirty.pop(device_id, None)
-        self._republish = True
-        self._wake.set()
-
-    async def _publish_info(self, client: MqttClient) -> None:
-        await client.publish(self.topics.bridge_info, self._info(), retain=True)
-
-    def _info(self) -> str:
-        return json.dumps(self.management.info(), default=str)
+        self.state.reloaded(device_ids)
 
     def _error(self, device_id: str, key: str | None, value: object, error: str) -> None:
         payload = error_document(key, value, error)
         log.info("%s refused: %s", device_id[:100], payload)
-        self._queue(Publish(self.topics.error(device_id), payload, retain=False))
+        self.state.queue(Publish(self.topics.error(device_id), payload, retain=False))
         self.feed.refused_command(device_id, payload)
 
 
@@ -536,7 +402,3 @@ async def _guarded(work: Any, failed: Callable[[str], None] | None) -> None:
         log.exception("internal error while handling a command or request")
         if failed is not None:
             failed(f"internal error: {type(exc).__name__}")
-
-
-def _availability_word(online: bool | None) -> str:
-    return "unknown" if online is None else "online" if online else "offline"

@@ -20,7 +20,7 @@ import logging
 from bridge.core.instance import Instance, answering_instance, instance_of, taken_message
 from bridge.core.topics import Topics
 from bridge.mqtt import BaseTopicTakenError, MqttClient, MqttRefusedError
-from bridge.mqtt.client import STANDBY_RETRY
+from bridge.mqtt.reconnect import STANDBY_RETRY
 
 log = logging.getLogger(__name__)
 ONLINE = b"online"

@@ -1,6 +1,12 @@
-"""The MQTT edge: one broker session (``MqttClient``) and the reconnect loop around it."""
+"""The MQTT edge: one broker session (``MqttClient``) and the reconnect loop around it.
 
-from bridge.mqtt.client import Message, MqttClient, run_with_reconnect
+Layers, each importing only those below it (pyproject.toml, import-linter):
+``reconnect`` (run_with_reconnect: the loop across sessions) -> ``session`` (MqttClient:
+one session, Message) -> ``connection`` (one aiomqtt connection: the only module that
+reaches into aiomqtt and paho) -> ``errors``. ``broker`` (the demo's embedded broker)
+stands apart.
+"""
+
 from bridge.mqtt.errors import (
     BaseTopicTakenError,
     MqttConnectError,
@@ -11,6 +17,8 @@ from bridge.mqtt.errors import (
     MqttUnackedError,
     MqttUnansweredError,
 )
+from bridge.mqtt.reconnect import run_with_reconnect
+from bridge.mqtt.session import Message, MqttClient
 
 __all__ = [
     "BaseTopicTakenError",

@@ -16,7 +16,7 @@ from bridge.config import MqttConfig, load_config_data
 from bridge.core.codec import limits_of
 from bridge.core.entity import Table
 from bridge.modbus.simulator import Quirks, Simulator
-from bridge.mqtt.client import Message, MqttClient
+from bridge.mqtt.session import Message, MqttClient
 from tests.integration.harness import cancel, eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 

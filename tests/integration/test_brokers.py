@@ -40,7 +40,7 @@ from bridge.config import MqttConfig
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.simulator import Simulator
 from bridge.mqtt import MqttClient, MqttDisconnectedError
-from bridge.mqtt import client as client_module
+from bridge.mqtt import connection as connection_module
 from tests.integration.brokers import AmqttBroker, NatsBroker, RabbitBroker, ServerBroker
 from tests.integration.harness import cancel, eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker, has_mosquitto
@@ -324,7 +324,7 @@ async def test_qos_2(broker: AnyBroker, monkeypatch: pytest.MonkeyPatch) -> None
     """``mqtt.qos: 2`` works where the broker does QoS 2 (RabbitMQ grants QoS 1 for it);
     NATS before 2.10 never acknowledges a QoS 2 publish, and the error says to set
     ``mqtt.qos: 1``."""
-    monkeypatch.setattr(client_module, "_TIMEOUT", 2.0)  # NATS: the wait for an answer
+    monkeypatch.setattr(connection_module, "TIMEOUT", 2.0)  # NATS: the wait for an answer
     config = MqttConfig(url=broker.url, qos=2, version="3.1.1")
     if isinstance(broker, NatsBroker) and NatsBroker.version() < (2, 10):
         with pytest.raises(MqttDisconnectedError, match=r"set mqtt\.qos: 1"):

@@ -14,7 +14,7 @@ import pytest
 from bridge.core.topics import Action, CommandTopic
 from bridge.dispatcher import Dispatcher
 from bridge.modbus.engine import Engine
-from bridge.mqtt.client import Message
+from bridge.mqtt.session import Message
 from tests.integration.harness import config, running, serving_tcp, simulator, tcp_bus
 from tests.integration.test_seed_behaviours import device, writes_to
 

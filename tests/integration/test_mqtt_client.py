@@ -26,7 +26,7 @@ from bridge.mqtt import (
     MqttUnansweredError,
     run_with_reconnect,
 )
-from bridge.mqtt import client as client_module
+from bridge.mqtt import connection as connection_module
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker, TlsFiles, free_port
@@ -432,7 +432,7 @@ async def test_falls_back_to_3_1_1_when_the_broker_never_answers_5(
     """amqtt takes an MQTT 5 CONNECT and never answers it (the CONNACK wait times out);
     RabbitMQ 3.x closes the connection (no wait at all: the CONNACK timeout is made
     endless here). Either way, no CONNACK on a connection that was made: try 3.1.1."""
-    monkeypatch.setattr(client_module, "_TIMEOUT", 0.5 if mqtt5 == "ignore" else 3600)
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.5 if mqtt5 == "ignore" else 3600)
     stub = StubBroker(mqtt5=mqtt5)
     async with stub as url:
         client = MqttClient(cfg(url, version="5"), will_topic=STATE)
@@ -445,7 +445,7 @@ async def test_falls_back_to_3_1_1_when_the_broker_never_answers_5(
 @pytest.mark.asyncio
 async def test_no_fallback_when_nothing_listens(monkeypatch: pytest.MonkeyPatch) -> None:
     """Nothing accepted the connection: that is not a protocol question (one attempt)."""
-    monkeypatch.setattr(client_module, "_TIMEOUT", 0.5)
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.5)
     stub = StubBroker()
     url = await stub.__aenter__()
     await stub.__aexit__()
@@ -458,7 +458,7 @@ async def test_no_fallback_when_nothing_listens(monkeypatch: pytest.MonkeyPatch)
 async def test_reconnects_ask_for_3_1_1_once_the_broker_needed_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(client_module, "_TIMEOUT", 0.5)
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.5)
     stub = StubBroker(mqtt5="ignore")
     sessions: list[str] = []
 

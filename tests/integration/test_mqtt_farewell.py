@@ -1,4 +1,4 @@
-"""The farewell at a stop (bridge.mqtt.client) against a broker that acknowledges late or not
+"""The farewell at a stop (bridge.mqtt.session) against a broker that acknowledges late or not
 at all: a real mosquitto behind a relay (tests/integration/proxy.py) that holds back what the broker answers (PUBACKs)
 while passing on everything the client sends. Whatever the broker does, the will topic
 must not be left ``online``. Where a test shortens ``FAREWELL_TIMEOUT``, it is to keep the
@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from bridge.mqtt import MqttClient
-from bridge.mqtt import client as client_module
+from bridge.mqtt import session as session_module
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.proxy import relayed
@@ -31,7 +31,7 @@ async def test_a_broker_that_stops_acknowledging_is_left_offline(
 ) -> None:
     """More farewell messages than paho keeps in flight (20): the goodbye waits behind them
     and never goes out. No clean DISCONNECT then, so the broker publishes the will."""
-    monkeypatch.setattr(client_module, "FAREWELL_TIMEOUT", 0.5)
+    monkeypatch.setattr(session_module, "FAREWELL_TIMEOUT", 0.5)
     async with observing(mosquitto, "t/#") as observer, relayed(mosquitto) as (relay, url):
         client = MqttClient(cfg(url), will_topic=STATE)
         await client.__aenter__()

@@ -1,4 +1,4 @@
-"""The session the reconnect loop keeps (bridge/mqtt/client.py, docs/brokers.md): one client
+"""The session the reconnect loop keeps (bridge/mqtt/reconnect.py, docs/brokers.md): one client
 id for every connection of a run, clean start, nothing kept by the broker.
 
 The case it is for: a connection the bridge lost but the broker still believes in (a node
@@ -19,7 +19,7 @@ import pytest
 
 from bridge.config import MqttConfig
 from bridge.mqtt import MqttClient
-from bridge.mqtt.client import run_with_reconnect
+from bridge.mqtt.reconnect import run_with_reconnect
 from tests.integration.harness import cancel, eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import observing

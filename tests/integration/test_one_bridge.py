@@ -25,7 +25,8 @@ from bridge.core.instance import Instance
 from bridge.errors import BridgeError
 from bridge.modbus.transport import Transport
 from bridge.mqtt import MqttClient
-from bridge.mqtt import client as client_module
+from bridge.mqtt import connection as connection_module
+from bridge.mqtt import reconnect as reconnect_module
 from tests.integration.harness import cancel, eventually, serving_serial, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.proxy import relayed
@@ -56,7 +57,7 @@ def pump_writes(sim: Any) -> int:
 @pytest.fixture(autouse=True)
 def quick_standby(monkeypatch: pytest.MonkeyPatch) -> None:
     """Look again every half second (the tests wait for a takeover)."""
-    monkeypatch.setattr(client_module, "STANDBY_RETRY", 0.5)
+    monkeypatch.setattr(reconnect_module, "STANDBY_RETRY", 0.5)
 
 
 @pytest.mark.asyncio
@@ -75,7 +76,7 @@ async def test_a_second_bridge_stands_by_and_a_command_runs_once(
         async with started(first):
             await eventually(lambda: observer.retained.get(watched[1]) == b"online", 15)
             second = Bridge(bridge_config_for(mosquitto, port))
-            with caplog.at_level(logging.ERROR, logger="bridge.mqtt.client"):
+            with caplog.at_level(logging.ERROR, logger="bridge.mqtt.reconnect"):
                 async with started(second):
                     await eventually(lambda: second.mqtt_state == "standby", 10)
                     said = [
@@ -221,7 +222,7 @@ async def test_an_unanswered_subscription_is_asked_again_and_state_goes_out_mean
     """A cluster that does not answer a SUBSCRIBE in time (its consumer not created yet):
     the session goes on, state and availability go out, the commands are asked for again
     and work once held; bridge/health says which subscriptions hold."""
-    monkeypatch.setattr(client_module, "_TIMEOUT", 1.0)  # the SUBACK wait: 10 s in life
+    monkeypatch.setattr(connection_module, "TIMEOUT", 1.0)  # the SUBACK wait: 10 s in life
     sim = simulator((1, PUMP))
     watched = ("modbus/nastec_vasco/availability", "modbus/bridge/health")
     async with (

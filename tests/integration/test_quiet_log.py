@@ -16,7 +16,7 @@ import pytest
 from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
 from bridge.mqtt import MqttClient
-from bridge.mqtt import client as client_module
+from bridge.mqtt import session as session_module
 from tests.integration.harness import eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.proxy import relayed
@@ -74,7 +74,7 @@ async def test_a_broker_slower_than_the_bridge_is_said_once_with_numbers(
 ) -> None:
     """Acknowledgements a second late (shortened from 30 s to 0.5 s here): one WARNING for
     the session, with how long and how many."""
-    monkeypatch.setattr(client_module, "BACKLOG_SAID_AFTER", 0.5)
+    monkeypatch.setattr(session_module, "BACKLOG_SAID_AFTER", 0.5)
     async with relayed(mosquitto) as (relay, url):
         client = MqttClient(MqttConfig(url=url), will_topic="t/state")
         async with client:

@@ -22,7 +22,7 @@ import pytest
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
-from bridge import app as app_module
+from bridge import state_publisher as state_publisher_module
 from bridge.app import Bridge
 from bridge.core.entity import Table
 from bridge.core.mapping import builtin_mapping_path, load_mapping
@@ -330,7 +330,7 @@ async def test_a_sustained_flood_of_home_assistant_online_republishes_once_per_g
 ) -> None:
     """``online`` every 0.2 s for 3 s: one republish at its start, then none until
     ``HA_REPUBLISH_GAP`` (shortened to 2.5 s here) has passed since it."""
-    monkeypatch.setattr(app_module, "HA_REPUBLISH_GAP", 2.5)
+    monkeypatch.setattr(state_publisher_module, "HA_REPUBLISH_GAP", 2.5)
     sim = all_units()
     config = "homeassistant/device/vacon_nx/config"
     async with (

@@ -27,7 +27,7 @@ from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import Priority
 from bridge.modbus.simulator import Quirks, Simulator
-from bridge.mqtt.client import MqttClient
+from bridge.mqtt.session import MqttClient
 from tests.integration.harness import (
     Recorder,
     cancel,

@@ -1,0 +1,289 @@
+"""One connection to a broker through aiomqtt (and paho-mqtt under it): what a session
+(bridge/mqtt/session.py) stands on, and the only module that reaches into aiomqtt's and
+paho's internals (the pinned minor keeps them stable).
+
+``connect`` opens one connection at one protocol version: TLS for mqtts:// (a failed
+handshake closes its socket right there), user name and password, the Last Will
+``offline`` (retained, QoS 1) on the will topic, a clean start (3.1.1: clean session) and,
+on MQTT 5, a session expiry of 0 and ``MAX_PACKET`` as the largest packet the bridge
+accepts (the broker drops bigger ones instead of sending them). It tells a refusal
+(MqttConnectError with the broker's code), a connection taken but never answered
+(MqttUnansweredError: the session falls back to 3.1.1) and a broker out of reach apart.
+``TIMEOUT`` bounds every wait for an answer: CONNACK, PUBACK, SUBACK, UNSUBACK. The socket
+sends at once (TCP_NODELAY).
+
+``Connection`` is aiomqtt's client with paho's callbacks overridden:
+
+- aiomqtt 2.5 drops paho's DUP flag when it wraps a message; ``Received`` keeps it
+  (tests/integration/test_mqtt_client.py checks it against a broker that sets DUP);
+- aiomqtt ignores the reason code of an MQTT 5 PUBACK: a publish the broker refuses (an
+  ACL: 0x87 not authorised) is logged once per topic at WARNING instead of passing for
+  delivered;
+- retained messages matching a filter in ``collectors`` go there, every message on a topic
+  in ``watchers`` goes there, the rest to the session's ``messages()``;
+- a broker that closes the connection instead of answering the CONNECT ends the wait at
+  once; a SUBACK or UNSUBACK given up on is a DEBUG line; a socket closed before asyncio
+  registers its writer is skipped; ``wake_on_loss`` wakes every wait for an
+  acknowledgement as soon as the connection ends.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+import ssl
+import time
+from typing import Any
+from urllib.parse import urlsplit
+
+import aiomqtt
+import paho.mqtt.client as paho
+from aiomqtt.exceptions import MqttConnectError as _RefusedByBroker
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+from paho.mqtt.reasoncodes import ReasonCode
+
+from bridge.config import MqttConfig, TlsConfig
+from bridge.mqtt.errors import MqttConnectError, MqttUnansweredError
+
+OFFLINE = b"offline"
+TIMEOUT = 10.0  # seconds for CONNACK, PUBACK, SUBACK, UNSUBACK
+FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
+MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
+
+_log = logging.getLogger(__name__)
+
+
+class Received(aiomqtt.Message):
+    """aiomqtt's message plus the DUP flag that aiomqtt leaves out."""
+
+    def __init__(self, message: paho.MQTTMessage) -> None:
+        properties = getattr(message, "properties", None)
+        super().__init__(
+            message.topic,
+            bytes(message.payload),
+            message.qos,
+            message.retain,
+            message.mid,
+            properties,
+        )
+        self.duplicate = bool(message.dup)
+        self.received = time.monotonic()
+
+
+class Connection(aiomqtt.Client):
+    """aiomqtt's client, keeping DUP and routing retained messages to ``retained()``."""
+
+    def __init__(self, hostname: str, port: int, **options: Any) -> None:
+        super().__init__(hostname, port, **options)
+        # aiomqtt warns for every publish beyond ten unacknowledged ones: a burst of state
+        # is normal operation; a backlog is said by MqttClient.publish, once, with numbers
+        self.pending_calls_threshold = 2**62
+        self.backlog_said = False
+        self.collectors: dict[str, asyncio.Queue[Received]] = {}
+        self.watchers: dict[str, asyncio.Queue[Received]] = {}  # by exact topic, live too
+        self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
+        self.reached = False  # the socket (and TLS) connected and CONNECT was sent
+
+    def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
+        """The socket (and TLS) connected; paho sends the CONNECT next. Marked here, in the
+        connecting thread before the CONNECT goes out, not once connect() returned: a
+        broker that closes at once on the CONNECT (RabbitMQ 3.x and MQTT 5) could be read
+        on the event loop before that, and was taken for a refused connection."""
+        self.reached = True
+        super()._on_socket_open(client, userdata, sock)
+
+    def _on_disconnect(self, *args: Any, **kwargs: Any) -> None:
+        """A broker that closes the connection instead of answering the CONNECT (RabbitMQ
+        3.x does for MQTT 5) ends the wait at once; aiomqtt would wait out the timeout."""
+        if self.reached and not self._connected.done():
+            self._connected.set_exception(aiomqtt.MqttError("closed before CONNACK"))
+            return
+        super()._on_disconnect(*args, **kwargs)
+
+    def _on_publish(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        mid: int,
+        reason_code: ReasonCode,
+        properties: Properties,
+    ) -> None:
+        if isinstance(reason_code, ReasonCode) and reason_code.value >= FAILURE:
+            message = self._client._out_messages.get(mid)
+            topic = message.topic if message is not None else f"message {mid}"
+            level = logging.DEBUG if topic in self.refused_topics else logging.WARNING
+            self.refused_topics.add(topic)
+            _log.log(level, "the broker refused a publish to %s: %s", topic, reason_code)
+        super()._on_publish(client, userdata, mid, reason_code, properties)
+
+    def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, *args: Any) -> None:
+        """aiomqtt's, except that the SUBACK of a SUBSCRIBE given up on (no answer in time:
+        a cluster creating its consumers) is a DEBUG line, not an ERROR with a traceback."""
+        if mid not in self._pending_subscribes:
+            _log.debug("a late SUBACK (message %d): the subscription was asked again", mid)
+            return
+        super()._on_subscribe(client, userdata, mid, *args)
+
+    def _on_unsubscribe(self, client: paho.Client, userdata: Any, mid: int, *args: Any) -> None:
+        if mid not in self._pending_unsubscribes:
+            _log.debug("a late UNSUBACK (message %d)", mid)
+            return
+        super()._on_unsubscribe(client, userdata, mid, *args)
+
+    def _on_message(self, _client: paho.Client, _userdata: Any, message: paho.MQTTMessage) -> None:
+        received = Received(message)
+        watcher = self.watchers.get(received.topic.value)
+        if watcher is not None:
+            watcher.put_nowait(received)
+            return
+        if received.retain:
+            for topic_filter, queue in self.collectors.items():
+                if received.topic.matches(topic_filter):
+                    queue.put_nowait(received)
+                    return
+        self._queue.put_nowait(received)  # unbounded: never QueueFull
+
+    def _on_socket_register_write(self, client: paho.Client, _userdata: Any, sock: Any) -> None:
+        """aiomqtt's, except that a socket closed before the loop's next turn is skipped:
+        aiomqtt's deferred ``add_writer`` on a closed descriptor made asyncio log a
+        traceback whenever a connection broke while the bridge was sending."""
+        fileno = sock.fileno()
+
+        def write() -> None:
+            try:
+                client.loop_write()
+            except OSError as exc:  # the connection broke: the session ends
+                if not self._disconnected.done():
+                    self._disconnected.set_exception(exc)
+
+        def register() -> None:
+            if sock.fileno() == fileno:  # else closed meanwhile: nothing to write to
+                self._loop.add_writer(fileno, write)
+
+        self._loop.call_soon_threadsafe(register)
+
+    def send_at_once(self) -> None:
+        """TCP_NODELAY on the socket. paho leaves Nagle's algorithm on, which holds a small
+        publish (the state after a command) until the broker acknowledges the previous
+        segment, up to 40 ms on Linux (bench/latency.py)."""
+        sock = self._client.socket()
+        if isinstance(sock, socket.socket):  # ssl.SSLSocket included
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    @property
+    def unacknowledged(self) -> int:
+        """Publishes waiting for the broker's acknowledgement."""
+        return len(self._pending_publishes)
+
+    def abort(self) -> None:
+        """Close a connection that never completed; paho's close also stops aiomqtt's tasks."""
+        self._client._sock_close()
+
+    @property
+    def lost(self) -> bool:
+        """The broker connection ended (the socket closed, paho gave up on keepalive)."""
+        return self._disconnected.done()
+
+    def wake_on_loss(self) -> None:
+        """When the connection ends, wake whatever waits for an acknowledgement at once:
+        aiomqtt would leave it waiting for its whole timeout (10 s) after a broker died."""
+
+        def wake(lost: asyncio.Future[None]) -> None:
+            if not lost.cancelled():
+                lost.exception()  # seen: asyncio would log it as never retrieved
+            for event in (*self._pending_publishes.values(), *self._pending_unsubscribes.values()):
+                event.set()
+            for future in self._pending_subscribes.values():
+                if not future.done():
+                    future.set_exception(aiomqtt.MqttError("connection lost"))
+
+        self._disconnected.add_done_callback(wake)
+
+
+async def connect(
+    config: MqttConfig,
+    protocol: aiomqtt.ProtocolVersion,
+    context: ssl.SSLContext | None,
+    *,
+    client_id: str | None,
+    will_topic: str,
+) -> Connection:
+    """One connection at ``protocol``, connected (CONNACK received), or MqttConnectError."""
+    try:
+        password = config.password_value()
+    except OSError as exc:
+        raise MqttConnectError(
+            f"{config.broker_url}: cannot read the password: {exc.strerror}"
+        ) from exc
+    limits = None
+    v5 = protocol is aiomqtt.ProtocolVersion.V5
+    if v5:
+        limits = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+        limits.MaximumPacketSize = MAX_PACKET
+        limits.SessionExpiryInterval = 0  # the session ends with the connection
+    connection = Connection(
+        config.host,
+        config.port,
+        properties=limits,
+        identifier=client_id,
+        # nothing kept between sessions: clean start (5), clean session (3.1.1)
+        clean_session=None if v5 else True,
+        clean_start=True if v5 else paho.MQTT_CLEAN_START_FIRST_ONLY,
+        username=config.username,
+        password=password,
+        protocol=protocol,
+        will=aiomqtt.Will(will_topic, OFFLINE, qos=1, retain=True),
+        keepalive=round(config.keepalive),
+        tls_context=context,
+        timeout=TIMEOUT,
+        logger=_log.getChild("paho"),
+    )
+    try:
+        await connection.__aenter__()
+    except BaseException as exc:  # also cancelled: aiomqtt leaves the socket open
+        connection.abort()
+        if isinstance(exc, _RefusedByBroker):
+            code = exc.rc if isinstance(exc.rc, int) or exc.rc is None else exc.rc.value
+            raise MqttConnectError(
+                f"{config.broker_url} refused the connection: {exc}", code
+            ) from exc
+        if isinstance(exc, aiomqtt.MqttError) and connection.reached:
+            raise MqttUnansweredError(
+                f"{config.broker_url} took the connection but did not answer the CONNECT: {exc}"
+            ) from exc
+        if isinstance(exc, aiomqtt.MqttError):
+            raise MqttConnectError(f"cannot connect to {config.broker_url}: {exc}") from exc
+        raise
+    connection.send_at_once()
+    connection.wake_on_loss()
+    return connection
+
+
+class _ClosingSSLSocket(ssl.SSLSocket):
+    """paho leaves the socket open when the TLS handshake fails; close it right there."""
+
+    def do_handshake(self, block: bool = False) -> None:
+        try:
+            super().do_handshake(block)
+        except BaseException:
+            self.close()
+            raise
+
+
+def tls_context(config: MqttConfig) -> ssl.SSLContext | None:
+    """The TLS context for mqtts:// (None for mqtt://); reads the CA and key files."""
+    if urlsplit(config.broker_url).scheme != "mqtts":
+        return None
+    tls = config.tls or TlsConfig()
+    context = ssl.create_default_context(cafile=tls.ca)
+    context.sslsocket_class = _ClosingSSLSocket
+    if tls.cert is not None:
+        context.load_cert_chain(tls.cert, tls.key)
+    if tls.insecure:
+        context.check_hostname = False
+        context.verify_mode = ssl.CERT_NONE
+    return context
