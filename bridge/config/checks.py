@@ -3,7 +3,7 @@ sections (a device's bus, units shared on a bus, ids used twice, a gateway line 
 twice), topics MQTT would refuse,
 a password file or variable that is not there, mapping folders that do not exist.
 
-They work on whatever validated: ``bridge.config.load_config_data`` runs them on the whole
+They work on whatever validated: ``bridge.config.model.load_config_data`` runs them on the whole
 config, and on the parts that validate on their own when others do not, so that a file's
 problems are all reported in one run (``check``) rather than in rounds.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from bridge.config import DeviceConfig, ManagementConfig, MqttConfig, SerialBus, TcpBus
+    from bridge.config.model import DeviceConfig, ManagementConfig, MqttConfig, SerialBus, TcpBus
     from bridge.core.mapping import Mapping
 
 MAX_TOPIC_BYTES = 65535  # MQTT's limit on a topic name

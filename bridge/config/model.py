@@ -31,7 +31,7 @@ from pydantic import (
     model_validator,
 )
 
-from bridge.config_checks import (
+from bridge.config.checks import (
     folder_errors,
     reference_errors,
     secret_errors,
