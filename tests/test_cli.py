@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from bridge import cli
 from bridge.app import Bridge
+from bridge.cli import console as cli
 from bridge.cli import main
 from bridge.core.mapping import builtin_mapping_names
 from bridge.mqtt import MqttPublishError

@@ -27,7 +27,8 @@ from urllib.parse import urlsplit
 import pytest
 import yaml
 
-from bridge.cli import _parser
+from bridge.cli.console import _parser
+from bridge.cli.simulate import build_simulator
 from bridge.config import (
     LoadedConfig,
     MetricsConfig,
@@ -40,7 +41,6 @@ from bridge.config import (
 from bridge.core.health_report import BusSnapshot, Snapshot
 from bridge.core.mapping import builtin_mapping_names
 from bridge.metrics import BUS_HEALTH_PATH, HEALTH_PATH, serve_metrics
-from bridge.simulate_cli import build_simulator
 
 ROOT = Path(__file__).resolve().parent.parent
 COMPOSE_FILE = ROOT / "docker-compose.yml"

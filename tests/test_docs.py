@@ -29,8 +29,8 @@ import yaml
 from pydantic import BaseModel
 
 from bridge import config as config_module
+from bridge.cli.config_doc import EXAMPLE, REGENERATE, duration_fields, render_config_doc
 from bridge.config import Config, load_config_data
-from bridge.config_doc import EXAMPLE, REGENERATE, duration_fields, render_config_doc
 from bridge.core.address import Addressing
 from bridge.core.codec import decode, encode
 from bridge.core.discovery import DeviceInfo, Origin, build_device_discovery

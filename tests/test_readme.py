@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
+from bridge.cli.demo import SEEDS
 from bridge.config import Config, load_config
 from bridge.core.codec import decode
 from bridge.core.entity import Table
 from bridge.core.mapping import builtin_mapping_path, load_mapping, parse_mapping
 from bridge.core.yaml_source import parse_yaml
-from bridge.demo import SEEDS
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()

@@ -23,8 +23,8 @@ from typing import Any
 import pytest
 
 from bridge.app import Bridge
+from bridge.cli.demo import SEEDS
 from bridge.config import LoadedConfig, load_config_data
-from bridge.demo import SEEDS
 from tests.ha.homeassistant import HomeAssistant, HomeAssistantSocket, LogRecord
 from tests.integration.harness import cancel, serving_tcp, simulator
 from tests.integration.mosquitto import Broker

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
+from bridge.cli.demo import SEEDS
 from bridge.config import MqttConfig
-from bridge.demo import SEEDS
 from bridge.mqtt import MqttClient
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.mosquitto import Broker, has_mosquitto

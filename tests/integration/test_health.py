@@ -23,7 +23,7 @@ from typing import Any
 import pytest
 
 from bridge.app import Bridge
-from bridge.cli import EXIT_FAILED, main
+from bridge.cli.console import EXIT_FAILED, main
 from bridge.config import load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.errors import CommandExpiredError, DeviceTimeoutError, ValueRejectedError

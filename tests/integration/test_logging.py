@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.lifecycle import JsonFormatter
+from bridge.cli.lifecycle import JsonFormatter
 from bridge.modbus.engine import Engine
 from bridge.modbus.simulator import Quirks
 from tests.integration.harness import (

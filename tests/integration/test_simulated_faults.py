@@ -7,11 +7,11 @@ import argparse
 
 import pytest
 
-from bridge.cli import _parser
+from bridge.cli.console import _parser
+from bridge.cli.simulate import build_simulator
 from bridge.core.state import active_alarms
 from bridge.errors import InputError
 from bridge.modbus.engine import Engine
-from bridge.simulate_cli import build_simulator
 from tests.integration.harness import config, eventually, running, serving_tcp, simulator, tcp_bus
 
 

@@ -19,9 +19,9 @@ from urllib.parse import urlsplit
 import pytest
 
 from bridge.app import Bridge
+from bridge.cli.demo import SEEDS
 from bridge.config import MqttConfig, load_config_data
 from bridge.core.entity import Table
-from bridge.demo import SEEDS
 from bridge.modbus.simulator import Quirks
 from bridge.mqtt import MqttClient
 from tests.integration.harness import eventually

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.bus_spec import bus_from_config, parse_bus_spec, select_bus
+from bridge.cli.bus_spec import bus_from_config, parse_bus_spec, select_bus
 from bridge.config import SerialBus, TcpBus
 from bridge.errors import ConfigError
 

@@ -7,8 +7,8 @@ import json
 
 import pytest
 
+from bridge.cli.demo_control import fault_request
 from bridge.core.mapping import builtin_mapping_path, load_mapping
-from bridge.demo_control import fault_request
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 
 

@@ -9,11 +9,11 @@ import pytest
 from rich.console import Console
 
 from bridge.app import Bridge
+from bridge.cli.demo import SEEDS, BrokerChoice, demo_config
+from bridge.cli.demo_view import DemoView, mosquitto_options, render_table, status_label
 from bridge.config import MqttConfig
 from bridge.core.codec import decode
 from bridge.core.simulation import initial_image
-from bridge.demo import SEEDS, BrokerChoice, demo_config
-from bridge.demo_view import DemoView, mosquitto_options, render_table, status_label
 
 
 def demo_bridge(**login: str) -> Bridge:

@@ -15,9 +15,9 @@ import argparse
 import asyncio
 from typing import TextIO
 
+from bridge.cli.lifecycle import until_stopped
 from bridge.core.mapping import Mapping, load_mapping, resolve_mapping_path
 from bridge.errors import InputError, ValueRejectedError
-from bridge.lifecycle import until_stopped
 from bridge.modbus.null_modem import null_modem
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 

@@ -4,7 +4,7 @@
     modbus-mqtt-bridge read --bus tcp://10.0.0.7 --unit 3 0x97 2
     modbus-mqtt-bridge write -c config.yaml --bus rs485 --unit 3 0x97 100
 
-``--bus`` is a spec (``bridge/bus_spec.py``) or, with ``-c``, the id of a bus in a config
+``--bus`` is a spec (``bridge/cli/bus_spec.py``) or, with ``-c``, the id of a bus in a config
 file. Addresses are wire addresses (0-based, as in the frame), decimal or 0x hex. Results
 go to stdout (``--json`` for scripts), progress and errors to stderr. Exit codes: 0 done,
 2 invalid input (nothing sent), 1 the bus or the unit failed (or a scan found nobody).
@@ -25,12 +25,12 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table as RichTable
 
-from bridge.bus_spec import FORMS, select_bus
+from bridge.cli.bus_spec import FORMS, select_bus
+from bridge.cli.lifecycle import until_stopped
 from bridge.config import SerialBus, TcpBus, load_config
 from bridge.core.entity import Table
 from bridge.core.interpret import ORDERS
 from bridge.errors import ModbusError, ValueRejectedError
-from bridge.lifecycle import until_stopped
 from bridge.modbus.commission import (
     COIL_ON,
     UNITS,

@@ -22,13 +22,13 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from bridge.app import Bridge
+from bridge.cli.demo_broker import find_mosquitto, private_mosquitto
+from bridge.cli.demo_control import FAULT_REQUEST, fault_request
+from bridge.cli.demo_view import DemoView, mosquitto_options, render_plain, render_table
+from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
-from bridge.demo_broker import find_mosquitto, private_mosquitto
-from bridge.demo_control import FAULT_REQUEST, fault_request
-from bridge.demo_view import DemoView, mosquitto_options, render_plain, render_table
 from bridge.errors import BridgeError, ConfigError, InputError, first_of
-from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.mqtt import MqttConnectError
 from bridge.mqtt.broker import PROTOCOL, embedded_broker

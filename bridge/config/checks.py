@@ -1,79 +1,31 @@
-"""Checks of a config beyond its fields, as ``path: message`` rows: references between
-sections (a device's bus, units shared on a bus, ids used twice, a gateway line given
-twice), topics MQTT would refuse,
-a password file or variable that is not there, mapping folders that do not exist.
+"""Checks of a config beyond its model, as ``path: message`` rows: topics MQTT would
+refuse, a password or token file or variable that is not there (or holds no usable
+value), TLS files, mapping folders that do not exist; and the error rows themselves (list
+indexes replaced by ids, each row once).
 
-They work on whatever validated: ``bridge.config.load_config_data`` runs them on the whole
-config, and on the parts that validate on their own when others do not, so that a file's
-problems are all reported in one run (``check``) rather than in rounds.
+They work on whatever validated: ``bridge.config.loading.load_config_data`` runs them on
+the whole config, and on the parts that validate on their own when others do not, so that
+a file's problems are all reported in one run (``check``) rather than in rounds. The
+invariants between sections (references, units) are the model's (``bridge.config.model``).
 """
 
 from __future__ import annotations
 
 import os
-from collections import Counter
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from bridge.config.field import is_register_number
+from bridge.config.model import MIN_TOKEN
+
 if TYPE_CHECKING:
-    from bridge.config import DeviceConfig, ManagementConfig, MqttConfig, SerialBus, TcpBus
+    from bridge.config.model import DeviceConfig, ManagementConfig, WebConfig
+    from bridge.config.mqtt import MqttConfig
     from bridge.core.mapping import Mapping
 
 MAX_TOPIC_BYTES = 65535  # MQTT's limit on a topic name
-MAX_SERIAL_UNIT = 247
 _LONGEST_COMPONENT = "binary_sensor"
-
-
-def reference_errors(
-    buses: Sequence[SerialBus | TcpBus],
-    devices: Sequence[DeviceConfig],
-    invalid_buses: Collection[str] = (),
-) -> list[str]:
-    """Ids used twice, a device on a bus that does not exist, a unit a serial line cannot
-    address, two enabled devices at one unit of a bus. ``invalid_buses``: ids of buses that
-    exist in the file but did not validate (their devices are not checked against them)."""
-    errors = duplicates("buses", [bus.id for bus in buses])
-    errors += duplicates("devices", [device.id for device in devices])
-    known = {bus.id: bus for bus in buses}
-    units: dict[tuple[str, int], str] = {}
-    for device in devices:
-        where = f"devices.{device.id}"
-        bus = known.get(device.bus)
-        if bus is None:
-            if device.bus not in invalid_buses:
-                errors.append(f"{where}.bus: no bus {device.bus!r} (have {sorted(known)})")
-            continue
-        if bus.transport in ("rtu", "ascii") and device.unit > MAX_SERIAL_UNIT:
-            errors.append(f"{where}.unit: serial lines address units 1..{MAX_SERIAL_UNIT}")
-        if not device.enabled:
-            continue
-        other = units.setdefault((device.bus, device.unit), device.id)
-        if other != device.id:
-            errors.append(f"{where}.unit: unit {device.unit} is also {other!r} on {bus.id}")
-    return errors + shared_gateway_errors(buses)
-
-
-def shared_gateway_errors(buses: Iterable[SerialBus | TcpBus]) -> list[str]:
-    """A gateway's serial line carries one frame at a time: one bus per gateway port."""
-    seen: dict[tuple[str, int], str] = {}
-    errors = []
-    for bus in buses:
-        if getattr(bus, "serial_behind", None) is None:
-            continue
-        host, port = getattr(bus, "host", ""), getattr(bus, "tcp_port", 0)
-        other = seen.setdefault((host, port), bus.id)
-        if other != bus.id:
-            errors.append(
-                f"buses.{bus.id}.host: {host}:{port} is bus {other!r} too; "
-                "one serial line carries one frame at a time, so give its devices one bus"
-            )
-    return errors
-
-
-def duplicates(section: str, ids: list[str]) -> list[str]:
-    counts = Counter(ids)
-    return [f"{section}.{i}: id used {n} times" for i, n in counts.items() if n > 1]
 
 
 def topic_errors(
@@ -149,3 +101,46 @@ def with_ids(rows: Iterable[str], data: dict[str, Any]) -> list[str]:
 def unique(rows: Iterable[str]) -> list[str]:
     """Rows in their order, each once."""
     return list(dict.fromkeys(rows))
+
+
+def web_token_errors(web: WebConfig) -> list[str]:
+    if not web.enabled or (web.token_file is None and web.token_env is None):
+        return []
+    where = "bridge.web.token_file" if web.token_file is not None else "bridge.web.token_env"
+    try:
+        token = web.token_value() or ""
+    except OSError as exc:
+        return [f"{where}: cannot read {str(web.token_file)!r}: {exc.strerror}"]
+    if len(token) < MIN_TOKEN:
+        return [f"{where}: the token is missing or shorter than {MIN_TOKEN} characters"]
+    return []
+
+
+def device_password_errors(
+    devices: Iterable[DeviceConfig], mappings: dict[str, Mapping]
+) -> list[str]:
+    """A device password needs a mapping that unlocks with one, a source that holds it,
+    and a number the device register takes (0..65535); the value is never shown."""
+    errors: list[str] = []
+    for device in devices:
+        if not device.has_password:
+            continue
+        where = f"devices.{device.id}"
+        field = next(
+            name
+            for name in ("password", "password_file", "password_env")
+            if getattr(device, name) is not None
+        )
+        mapping = mappings.get(device.id)
+        if mapping is not None and mapping.protocol.unlock is None:
+            errors.append(f"{where}.{field}: the mapping {device.mapping} has no password unlock")
+            continue
+        if device.password_file is not None and not device.password_file.is_file():
+            errors.append(f"{where}.password_file: no such file {str(device.password_file)!r}")
+        elif device.password_env is not None and device.password_env not in os.environ:
+            errors.append(
+                f"{where}.password_env: environment variable {device.password_env} is not set"
+            )
+        elif not is_register_number(device.password_value()):
+            errors.append(f"{where}.{field}: the password must be a number 0..65535")
+    return errors

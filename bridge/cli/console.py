@@ -1,4 +1,5 @@
-"""Command line: ``modbus-mqtt-bridge check | schema | mappings list|show|validate``.
+"""Command line: ``modbus-mqtt-bridge run | check | schema | mappings list|show|validate``;
+the other commands' parsers come from their modules in ``bridge.cli`` (``_LAZY``).
 
 Exit codes: 0 success, 2 invalid input (the message names file, entity or path, field).
 """
@@ -17,6 +18,7 @@ from pathlib import Path
 from typing import TextIO
 
 from bridge import __version__
+from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.config import config_schema, load_config
 from bridge.core.address import format_address
 from bridge.core.entity import Entity
@@ -29,7 +31,6 @@ from bridge.core.mapping import (
     resolve_mapping_path,
 )
 from bridge.errors import BridgeError, InputError, MappingError, first_of
-from bridge.lifecycle import add_logging_arguments, configure_logging, until_stopped
 
 EXIT_OK = 0
 EXIT_INVALID = 2
@@ -66,11 +67,11 @@ def _reader_gone() -> int:
 # embedded demo broker): their parsers are built only when one of them is asked for (or
 # for help and errors, which list every command), so ``run`` keeps none of it in memory.
 _LAZY = {  # command: (module, the function that adds its parser)
-    "simulate": ("bridge.simulate_cli", "add_parser"),
-    "scan": ("bridge.commission_cli", "add_parsers"),
-    "read": ("bridge.commission_cli", "add_parsers"),
-    "write": ("bridge.commission_cli", "add_parsers"),
-    "demo": ("bridge.demo", "add_parser"),
+    "simulate": ("bridge.cli.simulate", "add_parser"),
+    "scan": ("bridge.cli.commission", "add_parsers"),
+    "read": ("bridge.cli.commission", "add_parsers"),
+    "write": ("bridge.cli.commission", "add_parsers"),
+    "demo": ("bridge.cli.demo", "add_parser"),
 }
 
 
@@ -166,7 +167,7 @@ def _check(args: argparse.Namespace, out: TextIO) -> int:
 
 def _schema(args: argparse.Namespace, out: TextIO) -> int:
     if args.markdown:
-        from bridge.config_doc import render_config_doc  # noqa: PLC0415 - docs only
+        from bridge.cli.config_doc import render_config_doc  # noqa: PLC0415 - docs only
 
         out.write(render_config_doc())
         return EXIT_OK
@@ -259,7 +260,3 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], out: TextIO) -
         print(
             "  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)).rstrip(), file=out
         )
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

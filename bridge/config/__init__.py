@@ -1,0 +1,61 @@
+"""The config file: MQTT connection, buses, devices. ``load_config`` validates it whole.
+
+    field.py    what the sections share: the strict base, files a config names, secrets
+    mqtt.py     the ``mqtt`` section: brokers, login, TLS, topic prefixes, output
+    model.py    buses, devices, the ``bridge`` section, and ``Config`` with its invariants
+    checks.py   checks beyond the model: files, variables, topic sizes; the error rows
+    loading.py  load_config(): the file, its mappings, every problem reported at once
+
+Each imports only the ones above it in this list (an import-linter contract in
+pyproject.toml): the checks read the model, the model never reads the checks. The names
+below are the package's public face; import them from ``bridge.config``.
+"""
+
+from bridge.config.field import FilePath, is_register_number, secret_of
+from bridge.config.loading import (
+    LoadedConfig,
+    load_config,
+    load_config_data,
+    load_device_mapping,
+)
+from bridge.config.model import (
+    MIN_TOKEN,
+    Bus,
+    Config,
+    DeviceConfig,
+    ManagementConfig,
+    MetricsConfig,
+    PollConfig,
+    ProtocolOverride,
+    SerialBus,
+    SerialLine,
+    TcpBus,
+    WebConfig,
+    config_schema,
+)
+from bridge.config.mqtt import MqttConfig, TlsConfig
+
+__all__ = [
+    "MIN_TOKEN",
+    "Bus",
+    "Config",
+    "DeviceConfig",
+    "FilePath",
+    "LoadedConfig",
+    "ManagementConfig",
+    "MetricsConfig",
+    "MqttConfig",
+    "PollConfig",
+    "ProtocolOverride",
+    "SerialBus",
+    "SerialLine",
+    "TcpBus",
+    "TlsConfig",
+    "WebConfig",
+    "config_schema",
+    "is_register_number",
+    "load_config",
+    "load_config_data",
+    "load_device_mapping",
+    "secret_of",
+]

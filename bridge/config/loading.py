@@ -1,0 +1,191 @@
+"""Loading a config file: ``load_config`` validates it whole and loads every mapping it
+names; ``load_device_mapping`` loads one device's mapping and checks the device against it.
+
+Errors are reported as ``path: message`` rows (``devices.borehole_pump.unit: ...``), all
+at once, and nothing is started on a bad file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import TypeAdapter, ValidationError
+
+from bridge.config.checks import (
+    device_password_errors,
+    folder_errors,
+    secret_errors,
+    topic_errors,
+    unique,
+    web_token_errors,
+    with_ids,
+)
+from bridge.config.model import (
+    Bus,
+    Config,
+    DeviceConfig,
+    ManagementConfig,
+    SerialBus,
+    TcpBus,
+    reference_errors,
+)
+from bridge.config.mqtt import MqttConfig
+from bridge.core.mapping import Mapping, format_validation_errors, load_mapping, mapping_warnings
+from bridge.core.mapping import resolve_mapping_path as _resolve
+from bridge.core.yaml_source import parse_yaml
+from bridge.errors import ConfigError, MappingError
+
+
+@dataclass(frozen=True, slots=True)
+class LoadedConfig:
+    """A validated config with each device's mapping loaded and its options checked."""
+
+    path: Path
+    config: Config
+    mappings: dict[str, Mapping]
+    warnings: tuple[str, ...] = ()  # the conventions a user's mapping breaks: not refused
+
+
+def load_config(path: Path) -> LoadedConfig:
+    """Read and validate a config file and every mapping it names; ConfigError on problems."""
+    try:
+        text = path.read_text(encoding="utf-8")
+        data = parse_yaml(text, str(path))
+    except OSError as exc:
+        raise ConfigError(str(path), [f"cannot read {path.absolute()}: {exc.strerror}"]) from None
+    except ValueError as exc:
+        raise ConfigError(str(path), [str(exc)]) from None
+    return load_config_data(data, path)
+
+
+def load_config_data(data: object, path: Path) -> LoadedConfig:
+    """Validate parsed config data; mapping paths are relative to ``path``'s folder.
+
+    Every problem of the file is reported at once: when some fields are invalid, the parts
+    that validate on their own (sections, buses, devices) are still checked against each
+    other and their mappings, so nothing waits for a second run."""
+    if not isinstance(data, dict):
+        raise ConfigError(str(path), ["the file must hold a mapping with mqtt, buses, devices"])
+    try:
+        config = Config.model_validate(data, context=_context(path))
+    except ValidationError as exc:
+        rows = with_ids(format_validation_errors(exc), data)
+        raise ConfigError(str(path), unique(rows + _errors_of_valid_parts(data, path))) from None
+    mappings, errors = _load_mappings(config.buses, config.devices, path.parent)
+    errors += secret_errors(config.mqtt)
+    errors += web_token_errors(config.bridge.web)
+    errors += device_password_errors(config.devices, mappings)
+    errors += topic_errors(config.mqtt, config.devices, mappings)
+    errors += folder_errors(config.bridge, path.parent)
+    if errors:
+        raise ConfigError(str(path), errors)
+    warnings = _mapping_warnings(config.devices, mappings)
+    return LoadedConfig(path=path, config=config, mappings=mappings, warnings=warnings)
+
+
+def _mapping_warnings(
+    devices: Iterable[DeviceConfig], mappings: dict[str, Mapping]
+) -> tuple[str, ...]:
+    """Each mapping's convention warnings once, under the first device that uses it."""
+    rows: list[str] = []
+    seen: set[int] = set()
+    for device in devices:
+        mapping = mappings.get(device.id)
+        if mapping is None or id(mapping) in seen:
+            continue
+        seen.add(id(mapping))
+        where = f"devices.{device.id}.mapping: {device.mapping}"
+        rows += [f"{where}: {row}" for row in mapping_warnings(mapping)]
+    return tuple(rows)
+
+
+def _errors_of_valid_parts(data: dict[str, Any], path: Path) -> list[str]:
+    """The checks beyond fields, run on the sections, buses and devices that validate on
+    their own (the invalid ones are reported already)."""
+    context = _context(path)
+    mqtt = _valid(MqttConfig, data.get("mqtt", {}), context)
+    bridge = _valid(ManagementConfig, data.get("bridge", {}), context)
+    raw_buses, raw_devices = _listed(data, "buses"), _listed(data, "devices")
+    buses = [bus for bus in (_valid(_BUS, item, context) for item in raw_buses) if bus]
+    devices = [d for d in (_valid(DeviceConfig, item, context) for item in raw_devices) if d]
+    valid_ids = {bus.id for bus in buses}
+    invalid = {b.get("id") for b in raw_buses if isinstance(b, dict)} - valid_ids
+    errors = reference_errors(buses, devices, invalid_buses={str(i) for i in invalid})
+    mappings, more = _load_mappings(buses, devices, path.parent)
+    errors += more + device_password_errors(devices, mappings)
+    if mqtt is not None:
+        errors += secret_errors(mqtt) + topic_errors(mqtt, devices, mappings)
+    if bridge is not None:
+        errors += folder_errors(bridge, path.parent) + web_token_errors(bridge.web)
+    return errors
+
+
+def _listed(data: dict[str, Any], section: str) -> list[Any]:
+    items = data.get(section)
+    return items if isinstance(items, list) else []
+
+
+def _context(path: Path) -> dict[str, Path]:
+    """The validation context of the config at ``path``: where its relative files are."""
+    return {"base": path.parent.absolute()}
+
+
+def _valid(model: Any, data: object, context: dict[str, Path]) -> Any:
+    """``data`` validated as ``model`` (a model class or a TypeAdapter), or None."""
+    validate = model.validate_python if isinstance(model, TypeAdapter) else model.model_validate
+    try:
+        return validate(data, context=context)
+    except ValidationError:
+        return None
+
+
+_BUS: TypeAdapter[SerialBus | TcpBus] = TypeAdapter(Bus)
+
+
+def _load_mappings(
+    buses: Iterable[SerialBus | TcpBus], devices: Iterable[DeviceConfig], base: Path
+) -> tuple[dict[str, Mapping], list[str]]:
+    loaded: dict[str, Mapping] = {}
+    cache: dict[Path, Mapping] = {}
+    errors: list[str] = []
+    known = {bus.id: bus for bus in buses}
+    for device in devices:
+        if device.bus not in known:
+            continue  # reported as a reference
+        mapping, problems = load_device_mapping(device, known[device.bus], base, cache)
+        errors += problems
+        if mapping is not None:
+            loaded[device.id] = mapping
+    return loaded, errors
+
+
+def load_device_mapping(
+    device: DeviceConfig,
+    bus: SerialBus | TcpBus,
+    base: Path,
+    cache: dict[Path, Mapping] | None = None,
+) -> tuple[Mapping | None, list[str]]:
+    """A device's mapping (relative paths from ``base``) and every problem with it for
+    this device, as ``devices.<id>.<field>: message`` rows: the file itself, the device's
+    options, a transport the model does not speak. The mapping is None if it cannot load."""
+    where = f"devices.{device.id}"
+    cache = {} if cache is None else cache
+    try:
+        path = _resolve(device.mapping, base)
+        mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
+    except MappingError as exc:
+        return None, [f"{where}.mapping: {exc.source}: {issue}" for issue in exc.issues]
+    errors = []
+    for name, value in device.options.items():
+        spec = mapping.options.get(name)
+        if spec is None:
+            known = ", ".join(mapping.options) or "none"
+            errors.append(f"{where}.options.{name}: the mapping has no such option ({known})")
+        elif value not in spec.choices:
+            errors.append(f"{where}.options.{name}: {value!r} is not one of {spec.choices}")
+    if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
+        errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
+    return mapping, errors
