@@ -4,10 +4,15 @@ Poll: due classes -> precomputed plan -> scheduler (serialised, gap) -> register
 decode what was read fresh -> ``on_update`` with the values that changed. Missed ticks are
 skipped, not queued. An offline device is probed once per backoff interval only.
 
-Writes go through the device's ``DeviceWriter`` (bridge/modbus/writer.py), which uses the
-poller's scheduler access (``submit``, ``read_block``), image, values and ``publish``;
-blocks the device refuses are searched and learnt by its ``RefusalLearner``
-(bridge/modbus/refusal_learning.py).
+The poller wires small parts, each given what the device knows (``DeviceState``,
+bridge/core/device_state.py: image, values, refusals, read limits, plans) and how it talks
+to its bus (``DeviceLink``, bridge/modbus/device_link.py: submit, read a block, health),
+and passing the values they changed to ``values_changed``: writes go through its
+``DeviceWriter`` (bridge/modbus/writer.py), blocks the device refuses are searched and
+learnt by its ``RefusalLearner`` (bridge/modbus/refusal_learning.py), two-word values read
+in two reads are checked by ``check_torn`` (bridge/modbus/tear_check.py), and a device
+with a communication watchdog is kept fed by ``keep_alive`` (bridge/modbus/keepalive.py).
+None of them imports the poller.
 """
 
 from __future__ import annotations
@@ -19,35 +24,25 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from bridge.config import DeviceConfig
-from bridge.core.codec import Value, decode, is_unknown_code
-from bridge.core.entity import PollClass, Table
+from bridge.core.codec import Value, is_unknown_code
+from bridge.core.device_state import DeviceState
+from bridge.core.entity import PollClass
 from bridge.core.guard import UNGUARDED, Guard
-from bridge.core.health import DeviceHealth, Fault, HealthPolicy, Outcome, Transition
+from bridge.core.health import DeviceHealth, HealthPolicy
 from bridge.core.mapping import Mapping, Point
-from bridge.core.planner import ReadLimits, addresses_of, limits_for, plan_reads
+from bridge.core.planner import Address, ReadLimits
 from bridge.core.protocol import Protocol
-from bridge.core.refusal_memory import RefusalMemory
-from bridge.core.request import Read, Write, WriteSequence
+from bridge.core.request import Read
 from bridge.core.timing import LinkTiming
-from bridge.core.watchdog import Watchdog
-from bridge.errors import (
-    BusError,
-    DeviceExceptionError,
-    DeviceTimeoutError,
-    FrameError,
-    MissingDataError,
-    ModbusError,
-)
+from bridge.modbus.device_link import DeviceLink, Refused
 from bridge.modbus.keepalive import keep_alive
-from bridge.modbus.refusal_learning import RefusalLearner, Refused
+from bridge.modbus.refusal_learning import RefusalLearner
 from bridge.modbus.scheduler import BusScheduler, Priority
 from bridge.modbus.tear_check import check_torn
-from bridge.modbus.unlock import Unlocker
 from bridge.modbus.writer import DeviceWriter, WriteCounters
 
 log = logging.getLogger(__name__)
 DEFAULT_POLICY = HealthPolicy()
-Address = tuple[Table, int]
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,34 +72,80 @@ class DevicePoller:
         guard: Guard = UNGUARDED,
     ) -> None:
         self.device = device
-        self.mapping = _with_overrides(mapping, device)
-        self.protocol: Protocol = self.mapping.protocol
-        self.points: dict[str, Point] = self.mapping.points(device.options)
-        options = tuple(sorted((self.mapping.default_options() | device.options).items()))
-        own = self.mapping.memo(("guard", options), lambda: Guard.of(self.points.values()))
-        self.guard = guard | own  # ``guard``: what earlier mappings guarded
-        self.scheduler = scheduler
-        self.timing = timing
-        self.timeout = device.protocol.response_timeout or timeout
-        self.retries = retries
+        self.state = DeviceState(
+            _with_overrides(mapping, device),
+            device.options,
+            timing=timing,
+            recheck=policy.refusal_recheck,
+            guard=guard,  # what earlier mappings guarded
+        )
+        self.link = DeviceLink(
+            device,
+            self.state,
+            scheduler,
+            timeout=device.protocol.response_timeout or timeout,
+            retries=retries,
+            policy=policy,
+            on_change=self._notify,
+            judge=self._judge,
+        )
         self.on_update = on_update
-        self.health = DeviceHealth(policy)
-        self.writer = DeviceWriter(self)
-        self.learner = RefusalLearner(self)
-        self.unlocker = Unlocker(device, self.protocol)
-        keepalive = self.protocol.keepalive
-        self.watchdog = Watchdog(keepalive.interval) if keepalive is not None else None
-        self.image: dict[Address, int] = {}
-        self.values: dict[str, Value] = {}
-        self.refusals = RefusalMemory(policy.refusal_recheck)
-        self.max_read: int | None = None  # learnt: fewer registers per read than mapped
-        self._plans: dict[PollClass, tuple[Read, ...]] = {}
-        self._limits_cache: ReadLimits | None = None
+        self.writer = DeviceWriter(self.state, self.link, self.values_changed)
+        self.learner = RefusalLearner(self.state, self.link)
         self._polled_once = False
         self.first_poll_done = False  # every class was asked once (answered or not)
-        self._last_traffic = 0.0
         self.unknown_codes = 0  # enum codes read that the mapping has no label for
         self._unknown_logged: set[tuple[str, Value]] = set()
+
+    # --- what the device knows and how it is reached (for readers of the poller) --------
+
+    @property
+    def mapping(self) -> Mapping:
+        """The mapping with this device's protocol overrides applied."""
+        return self.state.mapping
+
+    @property
+    def protocol(self) -> Protocol:
+        return self.state.protocol
+
+    @property
+    def points(self) -> dict[str, Point]:
+        return self.state.points
+
+    @property
+    def guard(self) -> Guard:
+        """This mapping's guard joined with the guards of the mappings before it."""
+        return self.state.guard
+
+    @property
+    def image(self) -> dict[Address, int]:
+        return self.state.image
+
+    @property
+    def values(self) -> dict[str, Value]:
+        return self.state.values
+
+    @property
+    def refused(self) -> frozenset[Address]:
+        """The addresses learnt as refused that plans avoid now (until their re-check)."""
+        return self.state.refused
+
+    @property
+    def max_read(self) -> int | None:
+        """Registers per read, when the device showed it takes fewer than mapped."""
+        return self.state.max_read
+
+    def limits(self) -> ReadLimits:
+        """The read limits as known now."""
+        return self.state.limits()
+
+    @property
+    def scheduler(self) -> BusScheduler:
+        return self.link.scheduler
+
+    @property
+    def health(self) -> DeviceHealth:
+        return self.link.health
 
     # --- polling ------------------------------------------------------------------
 
@@ -120,13 +161,16 @@ class DevicePoller:
         """Poll until cancelled (and feed the device's watchdog, bridge/modbus/keepalive.py);
         never raises for a device fault."""
         async with asyncio.TaskGroup() as group:
-            if self.watchdog is not None:
-                group.create_task(keep_alive(self), name=f"keepalive:{self.device.id}")
+            if self.link.watchdog is not None:
+                group.create_task(
+                    keep_alive(self.state, self.link, self.values_changed),
+                    name=f"keepalive:{self.device.id}",
+                )
             await self._poll_loop()
 
     def plan_of(self, poll_class: PollClass) -> tuple[Read, ...]:
         """The reads of one poll class, as planned now."""
-        return self._plan({poll_class})
+        return self.state.plan([poll_class])
 
     async def _poll_loop(self) -> None:
         next_due = dict.fromkeys((PollClass.FAST, PollClass.SLOW, PollClass.ONCE), 0.0)
@@ -166,23 +210,18 @@ class DevicePoller:
     def _offline_wake(self) -> float:
         return self.health.next_attempt if self.health.online is False else float("inf")
 
-    @property
-    def refused(self) -> frozenset[Address]:
-        """The addresses learnt as refused that plans avoid now (until their re-check)."""
-        return self.refusals.refused
-
     async def poll(self, classes: Iterable[PollClass]) -> None:
-        """Read every point of these classes once and publish what changed."""
+        """Read every point of these classes once and pass on what changed."""
         chosen = set(classes)
         self.learner.recheck()
         fresh: set[Address] = set()
-        plan = self._plan(chosen)
+        plan = self.state.plan(chosen)
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
         keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
-        await check_torn(self, keys, plan, fresh)
-        self.publish(keys, fresh)
+        await check_torn(self.state, self.link, keys, plan, fresh)
+        self._decode(keys, fresh)
         if not self.first_poll_done and set(PollClass) <= chosen:
             self.first_poll_done = True  # units and limits read (or not there): say so once
             self._notify(frozenset())
@@ -191,35 +230,11 @@ class DevicePoller:
         """Read these points (all when None) ahead of the polls; return their values."""
         wanted = [self.points[k] for k in keys] if keys is not None else list(self.points.values())
         fresh: set[Address] = set()
-        reads = plan_reads(wanted, self.limits()).reads
+        reads = self.state.reads_for(wanted)
         await self._read_pass(reads, Priority.READ_NOW, fresh)
-        await check_torn(self, [p.key for p in wanted], reads, fresh)
-        self.publish([p.key for p in wanted], fresh)
+        await check_torn(self.state, self.link, [p.key for p in wanted], reads, fresh)
+        self._decode([p.key for p in wanted], fresh)
         return {p.key: self.values.get(p.key) for p in wanted}
-
-    def _plan(self, classes: set[PollClass]) -> tuple[Read, ...]:
-        reads: list[Read] = []
-        for poll_class in sorted(classes):
-            if poll_class not in self._plans:
-                members = [p for p in self.points.values() if p.entity.poll_class is poll_class]
-                self._plans[poll_class] = plan_reads(members, self.limits()).reads
-            reads.extend(self._plans[poll_class])
-        return tuple(reads)
-
-    def limits(self) -> ReadLimits:
-        """The read limits as known now (cached; learning a refusal clears the cache)."""
-        if self._limits_cache is None:
-            self._limits_cache = limits_for(
-                self.mapping,
-                max_registers=self.max_read,
-                refused=self.refusals.refused,
-                timing=self.timing,
-            )
-        return self._limits_cache
-
-    def forget_plans(self) -> None:
-        self._plans.clear()
-        self._limits_cache = None
 
     async def _read_pass(
         self, reads: Iterable[Read], priority: Priority, fresh: set[Address], *, stop: bool = False
@@ -230,7 +245,7 @@ class DevicePoller:
         refused: list[Refused] = []
         for read in reads:
             timeouts = self.health.timeouts
-            if await self.read_block(read, priority, fresh, refused) or not stop:
+            if await self.link.read_block(read, priority, fresh, refused) or not stop:
                 continue
             if self.health.timeouts > timeouts:
                 return  # silent: the refused blocks are judged another time
@@ -238,160 +253,21 @@ class DevicePoller:
                 break  # probing an offline unit: one failed read settles it
         await self.learner.judge(refused, priority, fresh)
 
-    async def read_block(
-        self,
-        read: Read,
-        priority: Priority,
-        fresh: set[Address],
-        refused: list[Refused] | None = None,
-    ) -> bool:
-        """One read. A refusal is judged with the rest of the pass (added to ``refused``)
-        or, without a pass, on its own; True if the read (or a part of it) answered."""
-        try:
-            values = await self.submit(read, priority)
-        except DeviceExceptionError as exc:
-            if exc.action != "refused":
-                return False
-            if refused is not None:
-                refused.append((read, exc))
-                return False
-            return await self.learner.judge([(read, exc)], priority, fresh)
-        except ModbusError:
-            return False
-        self.keep(read, values, fresh)
-        return True
+    async def _judge(self, refused: list[Refused], priority: Priority, fresh: set[Address]) -> bool:
+        """A block refused outside a pass (a write's read, a keepalive read), judged alone."""
+        return await self.learner.judge(refused, priority, fresh)
 
-    def keep(self, read: Read, values: tuple[int, ...], fresh: set[Address]) -> None:
-        for address, value in zip(read.span, values, strict=True):
-            self.image[(read.table, address)] = value
-            fresh.add((read.table, address))
-        back = self.refusals.answer(addresses_of(read))
-        if back:
-            log.info("%s answers %s again; read again", self.device.id, self.learner.shown(back))
-            self.forget_plans()
-
-    async def submit(
-        self,
-        request: Read | Write | WriteSequence,
-        priority: Priority,
-        retries: int | None = None,
-        deadline: float | None = None,
-    ) -> tuple[int, ...]:
-        """One request through the bus scheduler, its outcome counted. A device locked by
-        a password is unlocked once and the request sent again (bridge/modbus/unlock.py)."""
-        return await self.unlocker.submit(
-            lambda: self._submit(request, priority, retries, deadline),
-            lambda write: self._submit(write, Priority.WRITE, self.retries, None),
-            self._locked_out,
-        )
-
-    def _locked_out(self, reason: str) -> None:
-        """The device stays locked: in error with the reason (logged once), offline."""
-        if self.health.fault is not Fault.LOCKED:
-            log.error("%s: %s", self.device.id, reason)
-            self.announce(self.health.locked(time.monotonic(), reason), first_contact=False)
-
-    async def _submit(
-        self,
-        request: Read | Write | WriteSequence,
-        priority: Priority,
-        retries: int | None,
-        deadline: float | None,
-    ) -> tuple[int, ...]:
-        if retries is None:  # reads are not resent: the next cycle reads again
-            retries = 0
-        answer: list[float] = []  # the device's time per frame, not the wait before it
-        try:
-            values = await self.scheduler.submit(
-                self.device.unit,
-                request,
-                timeout=self.timeout,
-                priority=priority,
-                retries=retries,
-                protocol=self.protocol,
-                deadline=deadline,
-                answered=answer.append,
-            )
-        except DeviceTimeoutError:
-            self._record(Outcome.TIMEOUT)
-            raise
-        except (BusError, FrameError):
-            self._record(Outcome.TIMEOUT)
-            raise
-        except DeviceExceptionError as exc:
-            outcome = {
-                "busy": Outcome.BUSY,
-                "fail": Outcome.FAILED,
-                "locked": Outcome.FAILED,
-            }.get(exc.action, Outcome.REFUSED)
-            self._record(outcome, code=exc.code)
-            raise
-        self._record(Outcome.OK, latency=sum(answer))
-        return values
-
-    def _record(
-        self, outcome: Outcome, *, latency: float | None = None, code: int | None = None
-    ) -> None:
-        now = time.monotonic()
-        self._last_traffic = now
-        dog = self.watchdog
-        if dog is not None and outcome is not Outcome.TIMEOUT and dog.answered(now):
-            log.info("%s answers again: its watchdog is fed", self.device.id)
-        first_contact = self.health.online is None
-        transition = self.health.record(outcome, now, latency=latency, code=code)
-        self.announce(transition, first_contact=first_contact)
-
-    def announce(self, transition: Transition | None, *, first_contact: bool) -> None:
-        """Log a change of state once (offline with the reason) and publish it."""
-        if transition is None:
-            return
-        fields = {"device": self.device.id, "unit": self.device.unit, "bus": self.scheduler.bus_id}
-        if transition is Transition.OFFLINE:
-            health = self.health
-            failures, backoff = health.consecutive_failures, health.backoff
-            reason = health.offline_reason(time.monotonic())
-            log.warning(
-                "%s (unit %d on %s) offline %s; retrying every %.1f s or later",
-                *fields.values(),
-                reason,
-                backoff,
-                extra=fields
-                | {
-                    "event": "device_offline",
-                    "failures": failures,
-                    "backoff_s": backoff,
-                    "reason": str(health.fault),
-                },
-            )
-        else:
-            word = "online" if first_contact else "back online"
-            event = "device_online" if first_contact else "device_recovered"
-            log.info("%s %s", self.device.id, word, extra=fields | {"event": event})
-        self._notify(frozenset())
-
-    def publish(self, keys: Iterable[str], fresh: set[Address]) -> None:
-        changed: set[str] = set()
-        refused = self.refusals.refused
-        for key in keys:
-            point = self.points[key]
-            if not point.entity.readable:
-                continue
-            span = {(point.table, a) for a in point.span}
-            if span & refused:
-                value: Value = None
-            elif span <= fresh:
-                try:
-                    value = decode(point, self.image)
-                except MissingDataError:
-                    value = None
-            else:
-                continue
-            if key not in self.values or self.values[key] != value:
-                changed.add(key)
-                self._count_unknown(point, value)
-            self.values[key] = value
+    def _decode(self, keys: Iterable[str], fresh: set[Address]) -> None:
+        """Decode what this pass read fresh; pass on what changed."""
+        changed = self.state.decode_fresh(keys, fresh)
         if changed:
-            self._notify(frozenset(changed))
+            self.values_changed(changed)
+
+    def values_changed(self, changed: frozenset[str]) -> None:
+        """Count the new unknown enum codes among ``changed``, then notify ``on_update``."""
+        for key in changed:
+            self._count_unknown(self.points[key], self.values[key])
+        self._notify(changed)
 
     def _count_unknown(self, point: Point, value: Value) -> None:
         """Count an enum code the mapping has no label for as it appears (published as

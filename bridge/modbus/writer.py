@@ -1,4 +1,5 @@
-"""One device's write path, beside its poller (bridge/modbus/poller.py).
+"""One device's write path: what it knows (bridge/core/device_state.py) and its link to the
+bus (bridge/modbus/device_link.py), the changes passed on through a callback.
 
 Write: check every key (known, writable, dangerous-write guard) -> read what the writes
 depend on (the word of a bit field, a sign register, limit registers, the current value
@@ -14,14 +15,14 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from bridge.core.address import to_wire
 from bridge.core.codec import Value, decode, encode
+from bridge.core.device_state import DeviceState
 from bridge.core.entity import Table
 from bridge.core.mapping import Point
-from bridge.core.planner import plan_reads
 from bridge.core.request import Read, Write, WriteSequence
 from bridge.core.write_plan import dependencies, frames_of, stored, unchanged, undo_of
 from bridge.errors import (
@@ -32,10 +33,8 @@ from bridge.errors import (
     PartialWriteError,
     ValueRejectedError,
 )
+from bridge.modbus.device_link import Changes, Link
 from bridge.modbus.scheduler import Priority
-
-if TYPE_CHECKING:
-    from bridge.modbus.poller import DevicePoller
 
 log = logging.getLogger(__name__)
 Address = tuple[Table, int]
@@ -53,10 +52,13 @@ class WriteCounters:
 
 
 class DeviceWriter:
-    """Writes to one device through its poller's scheduler, image and values."""
+    """Writes to one device through its link, against what it knows; the values a write
+    changed go to ``on_change``."""
 
-    def __init__(self, poller: DevicePoller) -> None:
-        self.poller = poller
+    def __init__(self, state: DeviceState, link: Link, on_change: Changes) -> None:
+        self.state = state
+        self.link = link
+        self.on_change = on_change
         self.counters = WriteCounters()
 
     async def write_many(
@@ -99,11 +101,11 @@ class DeviceWriter:
             return held  # every key unchanged (EEPROM, a toggle in place): nothing to write
         writes = frames_of(plan, {p.key for p in points if p.entity.pulse})
         resendable = all(p.entity.idempotent and p.state_source is None for p in points)
-        retries = self.poller.retries if resendable else 0  # a toggle is never resent
+        retries = self.link.retries if resendable else 0  # a toggle is never resent
         request: Write | WriteSequence = (
             writes[0]
             if len(writes) == 1
-            else WriteSequence(tuple(writes), undo_of(writes, self.poller.image))
+            else WriteSequence(tuple(writes), undo_of(writes, self.state.image))
         )
         attempts = self.counters.last_attempt
         spaced = [
@@ -113,7 +115,7 @@ class DeviceWriter:
         for address in spaced:  # an attempt counts: a toggle that timed out may have acted
             attempts[address] = time.monotonic()
         try:
-            await self.poller.submit(request, Priority.WRITE, retries=retries, deadline=deadline)
+            await self.link.submit(request, Priority.WRITE, retries=retries, deadline=deadline)
         except PartialWriteError as partial:
             raise await self._report_partial(points, partial) from None
         except CommandExpiredError as expired:
@@ -123,7 +125,7 @@ class DeviceWriter:
                 attempts.update(before)
             raise
         for write in writes:
-            self._store(write)
+            self.state.store(write)
         self.counters.done += len(plan)  # per key, like skipped_unchanged
         written = [p for p in points if p.key in plan]
         for point in written:
@@ -147,10 +149,10 @@ class DeviceWriter:
         points: list[Point] = []
         refused: dict[str, str] = {}
         for key in items:
-            point = self.poller.points.get(key)
+            point = self.state.points.get(key)
             try:
                 if point is None:
-                    raise ValueRejectedError(f"{key}: no such entity on {self.poller.device.id}")
+                    raise ValueRejectedError(f"{key}: no such entity on {self.link.device.id}")
                 self._check_allowed(point)
             except ValueRejectedError as exc:
                 refused[key] = str(exc)
@@ -166,7 +168,7 @@ class DeviceWriter:
         """Every key encoded against what the device holds, each key seeing the words the
         keys before it leave (two bit fields of one word); unchanged EEPROM values left
         out. CommandRejectedError naming every refused key."""
-        after: dict[Address, int] = dict(self.poller.image)
+        after: dict[Address, int] = dict(self.state.image)
         plan: dict[str, tuple[Write, ...]] = {}
         refused: dict[str, str] = {}
         for point in points:
@@ -194,7 +196,7 @@ class DeviceWriter:
 
     def _required(self, point: Point) -> list[Point]:
         """The points a write of ``point`` requires a value of (``requires``)."""
-        return [self.poller.points[k] for k in point.entity.requires if k in self.poller.points]
+        return [self.state.points[k] for k in point.entity.requires if k in self.state.points]
 
     def _check_requirements(self, points: list[Point]) -> None:
         """Every key whose ``requires`` do not hold now (read fresh) is refused with the
@@ -204,7 +206,7 @@ class DeviceWriter:
             for required in self._required(point):
                 wanted = point.entity.requires[required.key]
                 allowed = wanted if isinstance(wanted, list) else [wanted]
-                value = decode(required, self.poller.image)
+                value = decode(required, self.state.image)
                 if value not in allowed:
                     refused[point.key] = (
                         f"{point.key} refused: {required.entity.name} ({required.key}) reads "
@@ -232,11 +234,11 @@ class DeviceWriter:
         """The value the device holds as last read (an unchanged EEPROM parameter, a
         toggle whose state is already the one asked for)."""
         if point.state_source is not None:
-            return self.poller.values.get(point.state_source.key)
-        if point.key in self.poller.values:
-            return self.poller.values[point.key]
+            return self.state.values.get(point.state_source.key)
+        if point.key in self.state.values:
+            return self.state.values[point.key]
         try:
-            return decode(point, self.poller.image)
+            return decode(point, self.state.image)
         except MissingDataError:
             return None
 
@@ -263,7 +265,7 @@ class DeviceWriter:
         error = PartialWriteError(
             partial.done, partial.total, restored=partial.restored, cause=partial.cause, now=shown
         )
-        log.error("%s: %s", self.poller.device.id, error)
+        log.error("%s: %s", self.link.device.id, error)
         return error
 
     def _publish_acknowledged(self, point: Point, writes: tuple[Write, ...]) -> None:
@@ -275,15 +277,15 @@ class DeviceWriter:
             return
         written = {(w.table, w.address + i) for w in writes for i in range(len(w.values))}
         if {(point.table, a) for a in point.span} <= written:
-            self.poller.publish([point.key], written)
+            self._decode([point.key], written)
 
     def _check_allowed(self, point: Point) -> None:
         entity = point.entity
         if not entity.writable:
             raise ValueRejectedError(f"{point.key} is read-only")
-        if entity.dangerous and not self.poller.device.allow_dangerous_writes:
+        if entity.dangerous and not self.link.device.allow_dangerous_writes:
             raise self._guarded(point.key)
-        protocol, device = self.poller.protocol, self.poller.device
+        protocol, device = self.state.protocol, self.link.device
         unlock = protocol.unlock
         if unlock is None or unlock.lock is None or not device.has_password:
             return
@@ -303,9 +305,9 @@ class DeviceWriter:
         device had before (the guard survives mapping reloads); ``before``: what the
         device holds, fresh for a bit field's word. A harmless bit field beside a guarded
         one writes the guarded bits back as they were read."""
-        if self.poller.device.allow_dangerous_writes:
+        if self.link.device.allow_dangerous_writes:
             return
-        guard = self.poller.guard
+        guard = self.state.guard
         image = dict(before)
         for w in writes:
             if guard.dangerous_changed(w.table, w.address, w.values, image):
@@ -317,13 +319,13 @@ class DeviceWriter:
     def _guarded(self, subject: str) -> ValueRejectedError:
         return ValueRejectedError(
             f"{subject} is a guarded write (dangerous); set allow_dangerous_writes: true "
-            f"for device {self.poller.device.id} to permit it"
+            f"for device {self.link.device.id} to permit it"
         )
 
     def _check_eeprom_rate(self, point: Point) -> None:
         """An EEPROM parameter is rewritten at most once per ``eeprom_write_interval``."""
         last = self.counters.last_write.get(_written(point))
-        wait = self.poller.protocol.eeprom_write_interval
+        wait = self.state.protocol.eeprom_write_interval
         if last is not None and time.monotonic() - last < wait:
             left = wait - (time.monotonic() - last)
             raise ValueRejectedError(
@@ -333,22 +335,25 @@ class DeviceWriter:
     async def _refresh(self, reads: list[Read]) -> None:
         fresh: set[Address] = set()
         for read in reads:
-            if not await self.poller.read_block(read, Priority.WRITE, fresh):
+            if not await self.link.read_block(read, Priority.WRITE, fresh):
                 raise MissingDataError(
-                    f"{self.poller.device.id}: cannot read {read.table.value} {read.address} "
+                    f"{self.link.device.id}: cannot read {read.table.value} {read.address} "
                     "that the write depends on"
                 )
-
-    def _store(self, write: Write) -> None:
-        self.poller.image.update(stored(write))
 
     async def _read_back(self, point: Point) -> Value:
         targets = [point] + ([point.sign] if point.sign is not None else [])
         fresh: set[Address] = set()
-        for read in plan_reads(targets, self.poller.limits()).reads:
-            await self.poller.read_block(read, Priority.WRITE, fresh)
-        self.poller.publish([point.key], fresh)
-        return self.poller.values.get(point.key)
+        for read in self.state.reads_for(targets):
+            await self.link.read_block(read, Priority.WRITE, fresh)
+        self._decode([point.key], fresh)
+        return self.state.values.get(point.key)
+
+    def _decode(self, keys: Iterable[str], fresh: set[Address]) -> None:
+        """Decode what was read or acknowledged fresh; pass on what changed."""
+        changed = self.state.decode_fresh(keys, fresh)
+        if changed:
+            self.on_change(changed)
 
 
 def _check_conditions_alone(points: list[Point]) -> None:

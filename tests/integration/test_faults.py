@@ -87,7 +87,7 @@ async def running_bridge(loaded: LoadedConfig) -> AsyncIterator[Bridge]:
     0.2-0.4 s; fail if the bridge task ended by itself."""
     bridge = Bridge(loaded)
     for poller in bridge.engine.devices.values():
-        poller.health = DeviceHealth(FAST_POLICY)
+        poller.link.health = DeviceHealth(FAST_POLICY)
     task = asyncio.create_task(bridge.run(), name="bridge")
     try:
         yield bridge

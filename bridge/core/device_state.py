@@ -1,0 +1,177 @@
+"""What one device knows, apart from how it is talked to (bridge/modbus/device_link.py). Pure.
+
+Its register image (every address as last read or written), its decoded values, the
+refusals it taught (bridge/core/refusal_memory.py), the registers per read it showed it
+takes, and the read limits and poll plans that follow from them (planned once, planned
+again when a refusal is learnt, answered again or re-checked). The guard of its dangerous
+bits (bridge/core/guard.py) is here too: this mapping's, joined with the mappings the
+device had before.
+
+The modbus edge feeds it what the bus answered (``keep``, ``store``) and asks it what to
+read (``plan``, ``reads_for``). Nothing here waits, sends, logs or notifies: a method whose
+change the caller must act on returns it (``decode_fresh``: the keys whose value changed;
+``keep``: the addresses answered again; ``avoid``: those refused for the first time).
+
+Not the published document (bridge/core/state.py): this is what it is built from.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from bridge.core.codec import Value, decode
+from bridge.core.entity import PollClass
+from bridge.core.guard import UNGUARDED, Guard
+from bridge.core.mapping import Mapping, Point, printed_address
+from bridge.core.planner import Address, ReadLimits, addresses_of, limits_for, plan_reads
+from bridge.core.protocol import Protocol
+from bridge.core.refusal_memory import RefusalMemory
+from bridge.core.request import Read, Write
+from bridge.core.timing import LinkTiming
+from bridge.core.write_plan import stored
+from bridge.errors import MissingDataError
+
+NO_LIMIT = 0x10000  # more registers than any read asks for
+
+
+class DeviceState:
+    """One device's image, values, learnt refusals and read limits, and its poll plans."""
+
+    def __init__(
+        self,
+        mapping: Mapping,
+        options: dict[str, str],
+        *,
+        timing: LinkTiming,
+        recheck: float,
+        guard: Guard = UNGUARDED,
+    ) -> None:
+        """``mapping`` with the device's protocol overrides applied; ``options`` its option
+        values; ``recheck``: seconds a learnt refusal is trusted; ``guard``: what the
+        mappings the device had before guarded."""
+        self.mapping = mapping
+        self.protocol: Protocol = mapping.protocol
+        self.points: dict[str, Point] = mapping.points(options)
+        chosen = tuple(sorted((mapping.default_options() | options).items()))
+        own = mapping.memo(("guard", chosen), lambda: Guard.of(self.points.values()))
+        self.guard = guard | own
+        self.timing = timing
+        self.image: dict[Address, int] = {}
+        self.values: dict[str, Value] = {}
+        self.refusals = RefusalMemory(recheck)
+        self.max_read: int | None = None  # learnt: fewer registers per read than mapped
+        self._plans: dict[PollClass, tuple[Read, ...]] = {}
+        self._limits: ReadLimits | None = None
+
+    # --- plans -------------------------------------------------------------------------
+
+    @property
+    def refused(self) -> frozenset[Address]:
+        """The addresses learnt as refused that plans avoid now (until their re-check)."""
+        return self.refusals.refused
+
+    def limits(self) -> ReadLimits:
+        """The read limits as known now (kept until a refusal changes them)."""
+        if self._limits is None:
+            self._limits = limits_for(
+                self.mapping,
+                max_registers=self.max_read,
+                refused=self.refusals.refused,
+                timing=self.timing,
+            )
+        return self._limits
+
+    def plan(self, classes: Iterable[PollClass]) -> tuple[Read, ...]:
+        """The reads of these poll classes, in class order, as planned now."""
+        reads: list[Read] = []
+        for poll_class in sorted(set(classes)):
+            if poll_class not in self._plans:
+                members = [p for p in self.points.values() if p.entity.poll_class is poll_class]
+                self._plans[poll_class] = plan_reads(members, self.limits()).reads
+            reads.extend(self._plans[poll_class])
+        return tuple(reads)
+
+    def reads_for(self, points: Iterable[Point]) -> tuple[Read, ...]:
+        """The reads of these points (not kept: a read on request, a read back)."""
+        return plan_reads(list(points), self.limits()).reads
+
+    def forget_plans(self) -> None:
+        self._plans.clear()
+        self._limits = None
+
+    # --- what the bus answered -----------------------------------------------------------
+
+    def keep(self, read: Read, values: tuple[int, ...], fresh: set[Address]) -> frozenset[Address]:
+        """Put a read's answer in the image (and its addresses in ``fresh``); return the
+        addresses it had refused before (now readable: the plans are made again)."""
+        for address, value in zip(read.span, values, strict=True):
+            self.image[(read.table, address)] = value
+            fresh.add((read.table, address))
+        back = self.refusals.answer(addresses_of(read))
+        if back:
+            self.forget_plans()
+        return back
+
+    def store(self, write: Write) -> None:
+        """What the device acknowledged writing goes in the image."""
+        self.image.update(stored(write))
+
+    def decode_fresh(self, keys: Iterable[str], fresh: set[Address]) -> frozenset[str]:
+        """Decode the readable ``keys`` whose registers are all in ``fresh`` (refused ones
+        become None); return the keys whose value changed. The others keep their value."""
+        changed: set[str] = set()
+        refused = self.refusals.refused
+        for key in keys:
+            point = self.points[key]
+            if not point.entity.readable:
+                continue
+            span = {(point.table, a) for a in point.span}
+            if span & refused:
+                value: Value = None
+            elif span <= fresh:
+                try:
+                    value = decode(point, self.image)
+                except MissingDataError:
+                    value = None
+            else:
+                continue
+            if key not in self.values or self.values[key] != value:
+                changed.add(key)
+            self.values[key] = value
+        return frozenset(changed)
+
+    # --- what the device refused ---------------------------------------------------------
+
+    def avoid(self, addresses: Iterable[Address], now: float) -> frozenset[Address]:
+        """Plan around these refused addresses until their re-check; return those refused
+        for the first time."""
+        avoided = self.refusals.refused
+        found = frozenset(addresses)
+        first = self.refusals.learn(found, now)
+        if found - avoided:
+            self.forget_plans()
+        return first
+
+    def limit_reads(self, count: int) -> bool:
+        """Read no more than ``count`` registers at once (the device showed it takes no
+        more); True if that is fewer than before."""
+        if count >= (self.max_read or NO_LIMIT):
+            return False
+        self.max_read = count
+        self.forget_plans()
+        return True
+
+    def recheck(self, now: float) -> frozenset[Address]:
+        """Forget the refusals due for a re-check (the next plan reads them); return them."""
+        due = self.refusals.expire(now)
+        if due:
+            self.forget_plans()
+        return due
+
+    def shown(self, addresses: Iterable[Address]) -> str:
+        """``holding 0x00A0 (wire 159)``: the address as the manual prints it, and as sent."""
+        points = self.points.values()
+        return ", ".join(
+            f"{table.value} {printed_address(points, table, wire, self.protocol)} (wire {wire})"
+            for table, wire in sorted(addresses)
+        )

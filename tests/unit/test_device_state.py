@@ -1,0 +1,156 @@
+"""What one device knows, without a bus (bridge/core/device_state.py): the image a read
+leaves, the values decoded from what was read fresh, the plans around learnt refusals."""
+
+from __future__ import annotations
+
+from bridge.core.device_state import DeviceState
+from bridge.core.entity import PollClass, Table
+from bridge.core.guard import UNGUARDED, Guard
+from bridge.core.request import Read, Write
+from bridge.core.timing import LinkTiming
+from tests.factory import make_mapping
+
+H, C = Table.HOLDING, Table.COIL
+RECHECK = 60.0
+MAPPING = make_mapping(
+    {
+        "speed": {"name": "Speed", "address": 1, "poll": "fast", "scale": 0.1},
+        "current": {"name": "Current", "address": 2, "poll": "fast"},
+        "energy": {"name": "Energy", "address": 3, "type": "u32", "poll": "fast"},
+        "mode": {"name": "Mode", "address": 11, "poll": "slow", "enum": {0: "off", 1: "on"}},
+        "command": {"name": "Command", "address": 21, "access": "w", "poll": "slow"},
+        "reset": {"name": "Reset", "address": 31, "access": "rw", "dangerous": True},
+        "relay": {"name": "Relay", "address": 6, "table": "coil", "access": "rw"},
+    },
+    protocol={"addressing": {"offset": -1}},
+)
+
+
+def state(guard: Guard = UNGUARDED) -> DeviceState:
+    return DeviceState(MAPPING, {}, timing=LinkTiming(), recheck=RECHECK, guard=guard)
+
+
+def fast_read(device: DeviceState) -> Read:
+    (read,) = device.plan([PollClass.FAST])
+    return read
+
+
+def test_a_poll_class_is_planned_once_and_its_reads_kept() -> None:
+    device = state()
+    plan = device.plan([PollClass.FAST])
+    assert plan == (Read(H, 0, 4),)  # wire addresses: printed minus one
+    assert device.plan([PollClass.FAST]) is not plan  # a new tuple of the same reads
+    assert device.plan([PollClass.FAST]) == plan
+    assert device.plan([PollClass.SLOW, PollClass.FAST]) == plan + device.plan([PollClass.SLOW])
+
+
+def test_keep_puts_the_answer_in_the_image_and_in_fresh() -> None:
+    device = state()
+    fresh: set[tuple[Table, int]] = set()
+    back = device.keep(Read(H, 0, 4), (215, 7, 1, 2), fresh)
+    assert back == frozenset()
+    assert device.image == {(H, 0): 215, (H, 1): 7, (H, 2): 1, (H, 3): 2}
+    assert fresh == {(H, 0), (H, 1), (H, 2), (H, 3)}
+
+
+def test_only_what_was_read_fresh_is_decoded_and_only_changes_are_returned() -> None:
+    device = state()
+    fresh: set[tuple[Table, int]] = set()
+    device.keep(Read(H, 0, 2), (215, 7), fresh)
+    keys = ["speed", "current", "energy", "command"]
+    assert device.decode_fresh(keys, fresh) == {"speed", "current"}
+    assert device.values == {"speed": 21.5, "current": 7}  # energy not read, command write-only
+    assert device.decode_fresh(keys, fresh) == frozenset()  # the same values again
+    device.keep(Read(H, 1, 3), (8, 0, 9), fresh)
+    assert device.decode_fresh(keys, fresh) == {"current", "energy"}
+    assert device.values == {"speed": 21.5, "current": 8, "energy": 9}
+
+
+def test_a_value_partly_read_keeps_its_last_value() -> None:
+    device = state()
+    device.values["energy"] = 5
+    fresh: set[tuple[Table, int]] = set()
+    device.keep(Read(H, 2, 1), (1,), fresh)  # the high word only
+    assert device.decode_fresh(["energy"], fresh) == frozenset()
+    assert device.values["energy"] == 5
+
+
+def test_a_refused_value_becomes_none() -> None:
+    device = state()
+    device.values["current"] = 7
+    assert device.avoid({(H, 1)}, now=0.0) == {(H, 1)}
+    assert device.decode_fresh(["current"], set()) == {"current"}
+    assert device.values["current"] is None
+
+
+def test_learnt_refusals_are_planned_around_until_answered_again() -> None:
+    device = state()
+    before = device.plan([PollClass.FAST])
+    assert device.avoid({(H, 1)}, now=0.0) == {(H, 1)}
+    assert device.refused == {(H, 1)}
+    around = device.plan([PollClass.FAST])
+    assert around != before
+    assert all((H, 1) not in {(r.table, a) for a in r.span} for r in around)
+    assert device.avoid({(H, 1)}, now=1.0) == frozenset()  # not news the second time
+    back = device.keep(Read(H, 1, 1), (3,), set())
+    assert back == {(H, 1)}
+    assert device.refused == frozenset()
+    assert device.plan([PollClass.FAST]) == before
+
+
+def test_a_refusal_is_read_again_at_its_recheck() -> None:
+    device = state()
+    before = device.plan([PollClass.FAST])
+    device.avoid({(H, 1)}, now=100.0)
+    assert device.recheck(now=100.0 + RECHECK - 1) == frozenset()
+    assert device.refused == {(H, 1)}
+    assert device.recheck(now=100.0 + RECHECK) == {(H, 1)}
+    assert device.refused == frozenset()
+    assert device.plan([PollClass.FAST]) == before
+
+
+def test_reads_are_limited_only_downwards() -> None:
+    device = state()
+    assert fast_read(device).count == 4
+    assert device.limit_reads(2)
+    assert device.max_read == 2
+    assert all(r.count <= 2 for r in device.plan([PollClass.FAST]))
+    assert device.limits().max_registers == 2
+    assert not device.limit_reads(3)  # more than it takes now: not learnt
+    assert not device.limit_reads(2)
+    assert device.max_read == 2
+    assert device.limit_reads(1)
+    assert all(r.count == 1 for r in device.plan([PollClass.FAST]))
+
+
+def test_reads_for_chosen_points_follow_the_limits_learnt() -> None:
+    device = state()
+    wanted = [device.points["speed"], device.points["energy"]]
+    assert device.reads_for(wanted) == (Read(H, 0, 4),)  # the gap is cheaper read through
+    device.limit_reads(2)
+    assert device.reads_for(wanted) == (Read(H, 0, 1), Read(H, 2, 2))
+
+
+def test_a_register_write_is_stored_a_coil_command_is_not() -> None:
+    device = state()
+    device.store(Write(16, H, 2, (1, 2)))
+    device.store(Write(5, C, 4, (0xFF00,)))
+    assert device.image == {(H, 2): 1, (H, 3): 2}
+
+
+def test_the_guard_joins_this_mapping_with_the_earlier_ones() -> None:
+    own = state().guard
+    assert (H, 30) in own.dangerous  # reset, printed 31
+    earlier = Guard.of(
+        make_mapping({"wipe": {"name": "Wipe", "address": 100, "access": "w", "dangerous": True}})
+        .points()
+        .values()
+    )
+    joined = state(guard=earlier).guard
+    assert set(joined.dangerous) == set(own.dangerous) | {(H, 100)}
+
+
+def test_addresses_are_shown_as_printed_and_as_sent() -> None:
+    device = state()
+    shown = device.shown({(H, 40), (H, 3), (H, 0)})  # the low word of energy; a hole
+    assert shown == "holding 0x0001 (wire 0), holding 0x0004 (wire 3), holding 0x0029 (wire 40)"
