@@ -26,6 +26,10 @@ bytes arriving while no request is outstanding are discarded (pymodbus drops the
 keep the bus silent until the line has been quiet for ``SETTLE`` seconds; they count as
 frame errors and are logged once per burst. Every reply is checked against its request
 (unit, function code, byte count) by the transport.
+
+One module, about 450 lines, on purpose: the queue, the silences, the late-reply guard and
+the deadline checks all decide around the one frame in flight, and split apart each would
+need the others' state.
 """
 
 from __future__ import annotations
