@@ -74,13 +74,13 @@ class CounterRule:
         """The rule of a mapping point: width from its type, step from its scale."""
         entity = point.entity
         lsb = abs(entity.scale) or 1.0
-        width = _width(point)
+        width = counter_width(point)
         wrap = width * lsb if width and not entity.offset else None
         return cls(confirm=confirm or CONFIRM, wrap=wrap, lsb=lsb)
 
 
-def _width(point: Point) -> int | None:
-    """How many raw values the counter has before it rolls over (unsigned types only)."""
+def counter_width(point: Point) -> int | None:
+    """Raw values a counter holds before it rolls over (unsigned 16 and 32-bit only)."""
     entity = point.entity
     if entity.kind != "number" or entity.bit is not None:
         return None
