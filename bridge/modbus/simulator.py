@@ -74,6 +74,7 @@ from bridge.core.simulation_behaviour import (
     start_image,
 )
 from bridge.core.simulation_counter import (
+    CounterFault,
     check_counter,
     counter_fault,
     fault_image,
@@ -301,6 +302,7 @@ class Simulator:
         self._tick = tick
         self._port: int | None = None
         self._moving = False
+        self._scheduled: list[tuple[float, list[tuple[int, str, str]]]] = []
         if len(self._devices) != len(units):
             raise ValueError("unit ids must be unique")
         for spec in units:
@@ -350,10 +352,22 @@ class Simulator:
         and ``reset`` the count itself; ValueRejectedError for a key that is no counter."""
         device = self._device(unit)
         point = device.point(key)
-        check_counter(point)
-        kind = counter_fault(fault)
+        kind = self.check_counter_fault(unit, key, fault)
         device.misreads.extend(fault_reads(point, kind, device.image))
         device.image |= fault_image(point, kind, device.image)
+
+    def check_counter_fault(self, unit: int, key: str, fault: str) -> CounterFault:
+        """The fault ``counter_fault`` would make (ValueRejectedError when it cannot)."""
+        point = self._device(unit).point(key)
+        check_counter(point)
+        kind = counter_fault(fault)
+        fault_reads(point, kind, self._device(unit).image)  # refuses a tear of one register
+        return kind
+
+    def schedule(self, seconds: float, faults: list[tuple[int, str, str]]) -> None:
+        """``counter_fault(unit, key, fault)`` for each of ``faults``, ``seconds`` after
+        the simulator starts serving."""
+        self._scheduled.append((seconds, faults))
 
     def faults(self, unit: int) -> list[str]:
         """The unit's active alarms (keys)."""
@@ -449,10 +463,18 @@ class Simulator:
             async with asyncio.TaskGroup() as group:
                 if self._tick > 0 and not self._moving:
                     group.create_task(self._move())
+                for seconds, faults in self._scheduled:
+                    group.create_task(self._fault_later(seconds, faults))
+                self._scheduled = []
                 await server.serving
         finally:
             self.ready.clear()
             await server.shutdown()  # type: ignore[no-untyped-call]
+
+    async def _fault_later(self, seconds: float, faults: list[tuple[int, str, str]]) -> None:
+        await asyncio.sleep(seconds)
+        for unit, key, fault in faults:
+            self.counter_fault(unit, key, fault)
 
     async def _move(self) -> None:
         self._moving = True
