@@ -13,6 +13,7 @@ from bridge.core.counters import (
     is_counter,
 )
 from bridge.core.mapping import builtin_mapping_path, load_mapping
+from bridge.core.state import NEVER_RESET, state_document
 
 U16 = CounterRule(wrap=65536.0)
 
@@ -202,3 +203,15 @@ def test_every_counter_of_the_shipped_mappings_is_found() -> None:
     ]
     assert len(found["nastec_vasco"]) == 7
     assert found["soft_starter"] == ["cumulative_run_time", "current_run_time"]
+
+
+def test_a_total_counter_carries_its_last_reset_in_the_document() -> None:
+    mapping = load_mapping(builtin_mapping_path("soft_starter"))
+    points = mapping.points({})
+    values = {"current_run_time": 12, "cumulative_run_time": 3400}
+    document = state_document(mapping, points, values)
+    assert document["last_reset"] == {"current_run_time": NEVER_RESET}
+    later = {"current_run_time": "2026-11-27T22:00:00+00:00"}
+    assert state_document(mapping, points, values, later)["last_reset"] == later
+    genset = load_mapping(builtin_mapping_path("smartgen_hgm6100"))
+    assert "last_reset" not in state_document(genset, genset.points({}), {})
