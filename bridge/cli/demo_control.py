@@ -3,7 +3,9 @@
 ``<base>/bridge/request/demo/fault`` with ``{"device": "borehole_pump", "fault":
 "alarm_dry_running"}`` raises that alarm in the simulated device (``"fault_code=motor_overload"``
 picks a fault code's label); ``{"device": ..., "fault": null}`` clears every fault, as if
-the cause went away (the device's own fault reset, where it has one, clears them too).
+the cause went away (the device's own fault reset, where it has one, clears them too). ``{"device": "genset",
+"counter": "energy", "fault": "tear"}`` makes a counter misread instead (zero, reboot, tear,
+jitter, wrap, reset: bridge/core/simulation_counter.py), to watch the bridge hold it back.
 The answer on ``<base>/bridge/response/demo/fault`` lists the device's active alarms.
 Only the demo serves it: a bridge on real hardware has no such request.
 """
@@ -35,7 +37,12 @@ def fault_request(simulator: Simulator, units: dict[str, int]) -> Callable[[byte
             if not isinstance(device, str) or device not in units:
                 raise ValueRejectedError(f"device: one of {sorted(units)}, not {device!r:.60}")
             fault = data.get("fault")
-            if fault is None:
+            counter = data.get("counter")
+            if counter is not None:
+                if not isinstance(counter, str) or not isinstance(fault, str):
+                    raise ValueRejectedError("counter: a counter key, with fault: its fault")
+                simulator.counter_fault(units[device], counter, fault)
+            elif fault is None:
                 simulator.clear_faults(units[device])
             elif isinstance(fault, str):
                 key, _, label = fault.partition("=")
@@ -44,8 +51,8 @@ def fault_request(simulator: Simulator, units: dict[str, int]) -> Callable[[byte
                 raise ValueRejectedError("fault: an alarm key (KEY or KEY=LABEL), or null")
         except ValueError as exc:  # JSON and refusals (ValueRejectedError is no ValueError)
             return response(error=f"payload: {exc}", transaction=transaction)
-        except ValueRejectedError as exc:
-            return response(error=str(exc), transaction=transaction)
+        except (ValueRejectedError, KeyError) as exc:  # KeyError: a key the unit lacks
+            return response(error=str(exc).strip('"'), transaction=transaction)
         faults = simulator.faults(units[device])
         return response({"device": device, "faults": faults}, transaction=transaction)
 

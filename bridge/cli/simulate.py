@@ -6,7 +6,8 @@
 
 ``--pty`` creates a virtual serial cable and prints the port the bridge should open.
 Quirks (``--latency``, ``--dead``, ``--max-read``...) reproduce real devices' behaviour.
-The devices follow their commands; ``--fault KEY[=LABEL]`` starts them tripped.
+The devices follow their commands; ``--fault KEY[=LABEL]`` starts them tripped;
+``--counter-fault energy=tear@60`` makes a counter misread a minute after the start.
 """
 
 from __future__ import annotations
@@ -65,6 +66,15 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar="KEY[=LABEL]",
         help="start tripped: this alarm on (a fault code's LABEL) in every unit that has it; "
         "the device's fault reset clears it (repeatable)",
+    )
+    sim.add_argument(
+        "--counter-fault",
+        action="append",
+        default=[],
+        metavar="KEY=FAULT[@SECONDS]",
+        help="counter KEY misreads SECONDS after the start (default 30) in every unit that "
+        "has it: zero, reboot (0 for two reads), tear, jitter (-1 digit), wrap, reset "
+        "(repeatable)",
     )
     sim.add_argument("--seed", type=int, default=0)
     quirks = sim.add_argument_group("device quirks (every unit)")
@@ -138,7 +148,31 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
     except ValueError as exc:
         raise InputError("simulate", [str(exc)]) from None
     _trip(simulator, [(spec.unit, spec.mapping) for spec in units], args.fault)
+    _counter_faults(simulator, units, args.counter_fault)
     return simulator
+
+
+def _counter_faults(simulator: Simulator, units: list[SimulatedUnit], specs: list[str]) -> None:
+    """``--counter-fault KEY=FAULT[@SECONDS]``: checked now, made to happen at SECONDS."""
+    problems = []
+    for spec in specs:
+        key, _, rest = spec.partition("=")
+        fault, _, after = rest.partition("@")
+        having = [u.unit for u in units if key in u.mapping.points(u.options)]
+        try:
+            seconds = float(after or 30)
+            if not having:
+                raise ValueRejectedError(f"no simulated unit has {key!r}")
+            for unit in having:
+                simulator.check_counter_fault(unit, key, fault)
+        except ValueError:
+            problems.append(f"--counter-fault {spec}: SECONDS must be a number")
+        except ValueRejectedError as exc:
+            problems.append(f"--counter-fault {spec}: {exc}")
+        else:
+            simulator.schedule(seconds, [(u, key, fault) for u in having])
+    if problems:
+        raise InputError("simulate", problems)
 
 
 def _trip(simulator: Simulator, units: list[tuple[int, Mapping]], faults: list[str]) -> None:

@@ -263,6 +263,8 @@ def numeric_sensor_options(key: str, entity: Entity, context: ComponentContext) 
         config["device_class"] = entity.ha.device_class
     if entity.ha.state_class is not None:
         config["state_class"] = entity.ha.state_class
+    if entity.ha.state_class == "total":  # a count the device starts again by design
+        config["last_reset_value_template"] = f"{{{{ value_json.last_reset.{key} }}}}"
     unit = unit_of(key, entity, context)
     if unit is not None:
         config["unit_of_measurement"] = unit

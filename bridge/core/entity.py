@@ -265,6 +265,12 @@ class Entity(BaseModel):
         description="a value below this is a guarded write, like a dangerous one (a negative "
         "speed reference runs the motor in reverse)",
     )
+    confirm_reset: int | None = Field(
+        None,
+        ge=1,
+        le=100,
+        description="a counter: lower readings in a row that confirm a reset (default 3)",
+    )
     secret: bool = Field(False, description="never published (passwords)")
     alarm: bool = Field(False, description="an alarm: bool when on, enum when not normal")
     normal: tuple[int, ...] = Field((0,), description="raw enum values that are not an alarm")

@@ -101,8 +101,45 @@ SWITCH_CLASSES = frozenset({"outlet", "switch"})
 BUTTON_CLASSES = frozenset({"identify", "restart", "update"})
 
 
+# What the energy dashboard takes for an energy counter (homeassistant/components/energy/
+# validate.py): a kWh counter in J or cal would load as a sensor but not as a source.
+ENERGY_DASHBOARD_UNITS = frozenset({"Wh", "kWh", "MWh", "GWh", "MJ", "GJ"})
+COUNTER_STATE_CLASSES = frozenset({"total", "total_increasing"})
+_ALWAYS_COUNTED = frozenset({"energy", "gas", "water"})  # classes HA only sums
+
+
 def presentation_problems(entity: Entity) -> list[str]:
     """What Home Assistant would refuse in this entity's presentation (empty when fine)."""
+    return _component_problems(entity) + counter_problems(entity)
+
+
+def counter_problems(entity: Entity) -> list[str]:
+    """What keeps a counter out of Home Assistant's statistics or energy dashboard: a
+    counter (an energy meter, a simulated rise per hour, a reset confirmation) without a
+    summing state class, an energy unit the dashboard refuses (a summed value that is not
+    a number is refused with the state classes)."""
+    state_class = entity.ha.state_class
+    counted = state_class in COUNTER_STATE_CLASSES
+    device_class = entity.ha.device_class
+    if not entity.readable:
+        return []
+    looks_counted = (
+        device_class in _ALWAYS_COUNTED
+        or entity.confirm_reset is not None
+        or (entity.simulate is not None and entity.simulate.per_hour is not None)
+    )
+    if looks_counted and not counted:
+        return [
+            "a counter needs state_class total_increasing (or total where the device resets "
+            "it by design): without one Home Assistant keeps no statistics of it"
+        ]
+    if counted and device_class == "energy" and entity.unit not in ENERGY_DASHBOARD_UNITS:
+        shown = ", ".join(sorted(ENERGY_DASHBOARD_UNITS))
+        return [f"unit {entity.unit!r} is not one the energy dashboard takes ({shown})"]
+    return []
+
+
+def _component_problems(entity: Entity) -> list[str]:
     component = entity.component
     device_class = entity.ha.device_class
     if component in (Component.SENSOR, Component.NUMBER):

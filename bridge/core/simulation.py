@@ -38,6 +38,7 @@ from bridge.core.codec import (
     raw_bounds,
     scale_value,
 )
+from bridge.core.counters import counter_width
 from bridge.core.entity import Access, DataType, Table
 from bridge.core.mapping import Mapping, Point
 from bridge.core.protocol import Protocol
@@ -520,8 +521,19 @@ def advance(
         try:
             changes |= words_for(mover.point, target, image)
         except ValueRejectedError:
-            continue
+            changes |= _rolled_over(mover, target, image)
     return changes
+
+
+def _rolled_over(mover: Mover, target: float, image: Image) -> dict[Cell, int]:
+    """A counter past its width starts again from 0, as a device's does; nothing else
+    moves past what its register holds."""
+    width = counter_width(mover.point) if mover.counter else None
+    if width is None:
+        return {}
+    with contextlib.suppress(ValueRejectedError):
+        return words_for(mover.point, target - width * abs(mover.point.entity.scale), image)
+    return {}
 
 
 def count_once(movers: tuple[Mover, ...], image: Image) -> dict[Cell, int]:

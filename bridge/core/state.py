@@ -4,7 +4,9 @@
 labels, unknown as null), plus ``status`` (the value of the mapping's status entity) and
 ``alarms`` (the names of the active alarms: the key of each alarm bit that is on, the
 label of each fault code that is not normal, ``<key>_<n>`` for a code the mapping has no
-label for: an unknown code is still an active fault). Secret and write-only entities are
+label for: an unknown code is still an active fault), and where the device has counters
+it starts again by design (state class ``total``), ``last_reset``: when each count began,
+as far as the bridge knows (``NEVER_RESET`` until it sees a reset). Secret and write-only entities are
 never in it. ``<base>/<device>/<key>`` carries the plain value: JSON for numbers, booleans and
 null (``23.5``, ``true``, ``null``), the bare text for labels and text.
 """
@@ -17,6 +19,10 @@ from typing import Any
 
 from bridge.core.codec import UNKNOWN_CODE, Value, is_unknown_code, unknown_code
 from bridge.core.mapping import Mapping, Point
+
+# A total counter's last_reset before the bridge has seen it reset: a fixed moment, so a
+# restart never tells Home Assistant that a new count began (it would add it again).
+NEVER_RESET = "1970-01-01T00:00:00+00:00"
 
 
 def published(points: AnyMapping[str, Point]) -> list[str]:
@@ -53,13 +59,20 @@ def alarm_active(point: Point, value: Value) -> bool:
 
 
 def state_document(
-    mapping: Mapping, points: AnyMapping[str, Point], values: AnyMapping[str, Value]
+    mapping: Mapping,
+    points: AnyMapping[str, Point],
+    values: AnyMapping[str, Value],
+    last_reset: AnyMapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """The JSON object published on ``<base>/<device>``."""
     document: dict[str, Any] = {key: values.get(key) for key in published(points)}
     if mapping.status is not None and mapping.status in points:
         document["status"] = values.get(mapping.status)
     document["alarms"] = active_alarms(points, values)
+    resetting = [k for k in published(points) if points[k].entity.ha.state_class == "total"]
+    if resetting:
+        last_reset = last_reset or {}
+        document["last_reset"] = {k: last_reset.get(k, NEVER_RESET) for k in resetting}
     return document
 
 

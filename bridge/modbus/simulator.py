@@ -73,6 +73,13 @@ from bridge.core.simulation_behaviour import (
     raise_fault,
     start_image,
 )
+from bridge.core.simulation_counter import (
+    CounterFault,
+    check_counter,
+    counter_fault,
+    fault_image,
+    fault_reads,
+)
 from bridge.modbus.frame import CoilWordRequest
 
 __all__ = ["Quirks", "SimulatedUnit", "Simulator", "two_byte_count_frame"]
@@ -141,6 +148,7 @@ class _Device:
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
         self.unlocked = False  # Quirks.password: the right password was written
+        self.misreads: list[dict[Cell, int]] = []  # answers the next reads get (counter faults)
 
     def set_quirks(self, quirks: Quirks) -> None:
         _check_quirks(quirks)
@@ -247,6 +255,14 @@ class _Device:
         if unlock.success is not None:
             self.image[(Table.HOLDING, write.address)] = unlock.success
 
+    def _misread(self, table: Table, address: int, count: int) -> dict[Cell, int]:
+        """The next counter fault's answer when this read covers all of its cells."""
+        if self.misreads and all(
+            t is table and address <= a < address + count for t, a in self.misreads[0]
+        ):
+            return self.misreads.pop(0)
+        return {}
+
     def _refusal(self, function_code: int) -> int | None:
         """The exception any request gets from this unit now: its quirk, or 01."""
         if self.quirks.exception_code is not None:
@@ -256,8 +272,9 @@ class _Device:
     def _fill(self, table: Table, start: int, address: int, count: int, block: list[int]) -> None:
         """Copy the image into pymodbus' block (bit tables: ``count`` 16-bit words)."""
         if not table.is_bits:
+            misread = self._misread(table, address, count)
             for a in range(address, address + count):
-                block[a - start] = self.image.get((table, a), 0)
+                block[a - start] = misread.get((table, a), self.image.get((table, a), 0))
             return
         for word in range(address // 16, address // 16 + count):
             bits = (self.image.get((table, word * 16 + b), 0) << b for b in range(16))
@@ -285,6 +302,7 @@ class Simulator:
         self._tick = tick
         self._port: int | None = None
         self._moving = False
+        self._scheduled: list[tuple[float, list[tuple[int, str, str]]]] = []
         if len(self._devices) != len(units):
             raise ValueError("unit ids must be unique")
         for spec in units:
@@ -327,6 +345,29 @@ class Simulator:
         """Every alarm of the unit back to normal, as a fault reset does."""
         device = self._device(unit)
         device.image |= clear_faults(device.behaviour, device.image)
+
+    def counter_fault(self, unit: int, key: str, fault: str) -> None:
+        """Make counter ``key`` misread (bridge/core/simulation_counter.py): ``zero``,
+        ``reboot``, ``tear`` and ``jitter`` change what the next reads answer, ``wrap``
+        and ``reset`` the count itself; ValueRejectedError for a key that is no counter."""
+        device = self._device(unit)
+        point = device.point(key)
+        kind = self.check_counter_fault(unit, key, fault)
+        device.misreads.extend(fault_reads(point, kind, device.image))
+        device.image |= fault_image(point, kind, device.image)
+
+    def check_counter_fault(self, unit: int, key: str, fault: str) -> CounterFault:
+        """The fault ``counter_fault`` would make (ValueRejectedError when it cannot)."""
+        point = self._device(unit).point(key)
+        check_counter(point)
+        kind = counter_fault(fault)
+        fault_reads(point, kind, self._device(unit).image)  # refuses a tear of one register
+        return kind
+
+    def schedule(self, seconds: float, faults: list[tuple[int, str, str]]) -> None:
+        """``counter_fault(unit, key, fault)`` for each of ``faults``, ``seconds`` after
+        the simulator starts serving."""
+        self._scheduled.append((seconds, faults))
 
     def faults(self, unit: int) -> list[str]:
         """The unit's active alarms (keys)."""
@@ -422,10 +463,18 @@ class Simulator:
             async with asyncio.TaskGroup() as group:
                 if self._tick > 0 and not self._moving:
                     group.create_task(self._move())
+                for seconds, faults in self._scheduled:
+                    group.create_task(self._fault_later(seconds, faults))
+                self._scheduled = []
                 await server.serving
         finally:
             self.ready.clear()
             await server.shutdown()  # type: ignore[no-untyped-call]
+
+    async def _fault_later(self, seconds: float, faults: list[tuple[int, str, str]]) -> None:
+        await asyncio.sleep(seconds)
+        for unit, key, fault in faults:
+            self.counter_fault(unit, key, fault)
 
     async def _move(self) -> None:
         self._moving = True

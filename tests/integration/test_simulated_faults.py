@@ -81,3 +81,35 @@ def test_simulate_refuses_a_fault_the_devices_do_not_have(fault: str, message: s
     with pytest.raises(InputError) as refused:
         build_simulator(simulate_args("--mapping", "nastec_vasco", "--unit", "1", "--fault", fault))
     assert refused.value.issues[0].startswith(message)
+
+
+@pytest.mark.asyncio
+async def test_simulate_counter_fault_happens_when_it_is_due() -> None:
+    sim = build_simulator(
+        simulate_args(
+            "--mapping", "smartgen_hgm6100", "--unit", "1", "--tick", "0",
+            "--counter-fault", "energy=reset@0.2", "--counter-fault", "run_hours=wrap@0.2",
+        )
+    )  # fmt: skip
+    before = sim.value(1, "energy")
+    assert isinstance(before, int) and before > 0
+    async with serving_tcp(sim):
+        await eventually(lambda: sim.value(1, "energy") == 0)
+        assert sim.value(1, "run_hours") == 65536 * 10000 - 2
+
+
+@pytest.mark.parametrize(
+    ("fault", "message"),
+    [
+        ("nothing=zero", "--counter-fault nothing=zero: no simulated unit has 'nothing'"),
+        ("energy=melt", "--counter-fault energy=melt: counter fault 'melt': one of zero, "),
+        ("energy=zero@soon", "--counter-fault energy=zero@soon: SECONDS must be a number"),
+        ("oil_pressure=zero", "--counter-fault oil_pressure=zero: oil_pressure is not a counter"),
+    ],
+)
+def test_simulate_refuses_a_counter_fault_it_cannot_make(fault: str, message: str) -> None:
+    with pytest.raises(InputError) as refused:
+        build_simulator(
+            simulate_args("--mapping", "smartgen_hgm6100", "--unit", "1", "--counter-fault", fault)
+        )
+    assert refused.value.issues[0].startswith(message), refused.value.issues

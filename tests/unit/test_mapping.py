@@ -670,6 +670,14 @@ def test_points_link_their_sources() -> None:
         ({"enum": {0: "a"}, "ha": {"device_class": "enum"}}, "takes no device_class"),
         ({"bit": 0, "ha": {"device_class": "temperature"}}, "is not one of binary_sensor's"),
         ({"access": "w", "press": 1, "ha": {"device_class": "problem"}}, "button's"),
+        # counters (issue 26): summed right, or refused
+        ({"unit": "kWh", "ha": {"device_class": "energy"}}, "a counter needs state_class"),
+        ({"unit": "h", "simulate": {"per_hour": 1}}, "a counter needs state_class"),
+        ({"confirm_reset": 5, "ha": {"state_class": "measurement"}}, "a counter needs"),
+        (
+            {"unit": "J", "ha": {"device_class": "energy", "state_class": "total_increasing"}},
+            "unit 'J' is not one the energy dashboard takes",
+        ),
     ],
 )
 def test_presentation_home_assistant_refuses(fields: dict, message: str) -> None:
