@@ -17,7 +17,9 @@ clean stop (Ctrl-C, SIGTERM) sets every device's availability ``offline`` before
 message it published. One bridge per base topic: before a connection says ``online``,
 ``check_alone`` (bridge/standby.py) checks that no other live bridge serves the topic
 (else this one stands by without polling: bridge/core/instance.py), and a bridge that
-comes up beside this one later is told apart by the ``bridge/info`` it publishes.
+comes up beside this one later is told apart by the ``bridge/info`` it publishes. Before
+its first state, a session reads the device documents it left retained, so counters
+carry on across a restart (bridge/counter_seed.py).
 
 The wiring: the parts call back into the bridge, and every callback is named in
 ``__init__`` and ``run``:
@@ -60,6 +62,7 @@ from bridge.core.instance import Instance, instance_of, taken_message
 from bridge.core.management_request import response
 from bridge.core.state import compact
 from bridge.core.topics import Topics
+from bridge.counter_seed import carry_counters
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
 from bridge.errors import ValueRejectedError, first_of
@@ -214,6 +217,7 @@ class Bridge:
                 for wanted in self.subscriptions.wanted:
                     group.create_task(self.subscriptions.keep(client, wanted))
                 await check_alone(client, self.topics, self.instance)
+                await carry_counters(client, self.topics, self.engine)
                 await client.announce()
                 self._polling()
                 # values, devices and info in one burst: one round trip, and no value waits

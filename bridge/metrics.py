@@ -40,6 +40,9 @@ the bridge started:
     modbus_device_timeouts_total{device}
     modbus_device_busy_answers_total{device}            busy answers
     modbus_device_unknown_codes_total{device}           enum codes without a label (code_<n>)
+    modbus_device_counter_readings_held_total{device}   counter readings held back (a 0, a
+                                                        torn read, jitter, a failed read)
+    modbus_device_counter_resets_total{device}          counter decreases confirmed
     modbus_device_exceptions_total{device,code}
     modbus_device_latency_seconds{device,quantile}      gauge, quantile 0.5 and 0.95;
                                                         absent before the first answer
@@ -91,6 +94,16 @@ _DEVICE_COUNTERS: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...]
         "unknown_codes",
         "Enum codes read that the mapping has no label for (published as code_<n>)",
         attrgetter("unknown_codes"),
+    ),
+    (
+        "counter_readings_held",
+        "Counter readings below the published value, or failed, not published",
+        attrgetter("counter_readings_held"),
+    ),
+    (
+        "counter_resets",
+        "Counter decreases confirmed by readings in a row and published",
+        attrgetter("counter_resets"),
     ),
 )
 _DEVICE_GAUGES: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...] = (

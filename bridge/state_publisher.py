@@ -190,7 +190,9 @@ class StatePublisher:
         topics = self.topics
         output = self.mqtt.output
         if poller.values and output != "values":
-            document = state_document(poller.mapping, poller.points, poller.values)
+            document = state_document(
+                poller.mapping, poller.points, poller.values, poller.state.last_reset
+            )
             burst.append((topics.device(device_id), compact(document), True))
         if output != "json":
             for key in sorted(keys & set(published(poller.points))):

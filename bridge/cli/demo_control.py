@@ -3,9 +3,10 @@
 ``<base>/bridge/request/demo/fault`` with ``{"device": "borehole_pump", "fault":
 "alarm_dry_running"}`` raises that alarm in the simulated device (``"fault_code=motor_overload"``
 picks a fault code's label); ``{"device": ..., "fault": null}`` clears every fault, as if
-the cause went away (the device's own fault reset, where it has one, clears them too). ``{"device": "genset",
-"counter": "energy", "fault": "tear"}`` makes a counter misread instead (zero, reboot, tear,
-jitter, wrap, reset: bridge/core/simulation_counter.py), to watch the bridge hold it back.
+the cause went away (the device's own fault reset, where it has one, clears them too).
+``{"device": "genset", "counter": "energy", "fault": "tear"}`` makes a counter misread
+instead (zero, reboot, tear, jitter, wrap, reset: bridge/core/simulation_counter.py), to
+watch the bridge hold it back.
 The answer on ``<base>/bridge/response/demo/fault`` lists the device's active alarms.
 Only the demo serves it: a bridge on real hardware has no such request.
 """

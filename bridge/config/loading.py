@@ -33,6 +33,7 @@ from bridge.config.model import (
     reference_errors,
 )
 from bridge.config.mqtt import MqttConfig
+from bridge.core.counters import counters_of
 from bridge.core.mapping import Mapping, format_validation_errors, load_mapping, mapping_warnings
 from bridge.core.mapping import resolve_mapping_path as _resolve
 from bridge.core.yaml_source import parse_yaml
@@ -186,6 +187,11 @@ def load_device_mapping(
             errors.append(f"{where}.options.{name}: the mapping has no such option ({known})")
         elif value not in spec.choices:
             errors.append(f"{where}.options.{name}: {value!r} is not one of {spec.choices}")
+    counters = counters_of(mapping.points(device.options).values()) if not errors else {}
+    for key in device.counter_confirm if not errors else ():
+        if key not in counters:
+            known = ", ".join(sorted(counters)) or "none"
+            errors.append(f"{where}.counter_confirm.{key}: not a counter of the mapping ({known})")
     if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
         errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
     return mapping, errors

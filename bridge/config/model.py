@@ -104,6 +104,11 @@ class DeviceConfig(Strict):
     options: dict[str, str] = Field(default_factory=dict)
     protocol: ProtocolOverride = ProtocolOverride()
     allow_dangerous_writes: bool = Field(False, description="permit writes marked dangerous")
+    counter_confirm: dict[str, Annotated[int, Field(ge=1, le=100)]] = Field(
+        default_factory=dict,
+        description="counter key -> lower readings in a row that confirm its reset (default "
+        "3, or the mapping's confirm_reset); fewer reads it sooner, more holds longer",
+    )
     password: SecretStr | None = Field(
         None, description="the device's user password (a mapping with protocol.unlock)"
     )

@@ -53,6 +53,7 @@ class Reading:
     value: float | None
     before: float | None = None  # the value published before (for a hold or a reset)
     reason: str = ""  # why a reading was held: "zero", "lower", "jitter", "not a number"
+    read: object = None  # what was read (for a hold)
 
     @property
     def published(self) -> bool:
@@ -114,7 +115,7 @@ class Counter:
     def read(self, value: object) -> Reading:
         """The outcome of one reading (the decoded value, or None when the read failed)."""
         if not _is_number(value):
-            return Reading(Kind.HELD, self.published, self.published, "not a number")
+            return Reading(Kind.HELD, self.published, self.published, "not a number", value)
         raw = float(value)  # type: ignore[arg-type]
         if self.published is None:
             return self._publish(Kind.FIRST, raw)
@@ -143,12 +144,12 @@ class Counter:
         assert before is not None
         if before - (raw + self.offset) <= self.rule.jitter * self.rule.lsb * (1 + 1e-9):
             self.lower.clear()
-            return Reading(Kind.HELD, before, before, "jitter")
+            return Reading(Kind.HELD, before, before, "jitter", raw)
         if self.lower and raw < self.lower[-1]:
             self.lower.clear()
         self.lower.append(raw)
         if len(self.lower) < self.rule.confirm:
-            return Reading(Kind.HELD, before, before, "zero" if raw == 0 else "lower")
+            return Reading(Kind.HELD, before, before, "zero" if raw == 0 else "lower", raw)
         self.offset = 0.0
         self.published = raw
         self.lower.clear()

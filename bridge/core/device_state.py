@@ -12,6 +12,12 @@ read (``plan``, ``reads_for``). Nothing here waits, sends, logs or notifies: a m
 change the caller must act on returns it (``decode_fresh``: the keys whose value changed;
 ``keep``: the addresses answered again; ``avoid``: those refused for the first time).
 
+Its counters (bridge/core/counters.py) stand between what is read and ``values``: a
+counter's lower reading is held back (its value stays), a rollover continued, a confirmed
+reset taken; ``decode_fresh`` keeps each reading that was not a plain rise in
+``counter_news`` for the caller to count and log (``take_counter_news``), and
+``seed_counters`` takes the values published before a restart.
+
 Not the published document (bridge/core/state.py): this is what it is built from.
 """
 
@@ -20,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from bridge.core.codec import Value, decode
+from bridge.core.counters import Kind, Reading, counters_of
 from bridge.core.entity import PollClass
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Mapping, Point, printed_address
@@ -45,10 +52,12 @@ class DeviceState:
         timing: LinkTiming,
         recheck: float,
         guard: Guard = UNGUARDED,
+        confirm: dict[str, int] | None = None,
     ) -> None:
         """``mapping`` with the device's protocol overrides applied; ``options`` its option
         values; ``recheck``: seconds a learnt refusal is trusted; ``guard``: what the
-        mappings the device had before guarded."""
+        mappings the device had before guarded; ``confirm``: lower readings in a row that
+        confirm a counter's reset, by key (else the entity's, else counters.CONFIRM)."""
         self.mapping = mapping
         self.protocol: Protocol = mapping.protocol
         self.points: dict[str, Point] = mapping.points(options)
@@ -58,6 +67,9 @@ class DeviceState:
         self.timing = timing
         self.image: dict[Address, int] = {}
         self.values: dict[str, Value] = {}
+        self.counters = counters_of(self.points.values(), confirm)
+        self.counter_news: list[tuple[str, Reading]] = []  # held, wrapped, reset readings
+        self.last_reset: dict[str, str] = {}  # a total counter's last confirmed reset
         self.refusals = RefusalMemory(recheck)
         self.max_read: int | None = None  # learnt: fewer registers per read than mapped
         self._plans: dict[PollClass, tuple[Read, ...]] = {}
@@ -135,10 +147,46 @@ class DeviceState:
                     value = None
             else:
                 continue
+            if key in self.counters:
+                reading = self.counters[key].read(value)
+                if reading.kind not in (Kind.FIRST, Kind.RISE):
+                    self.counter_news.append((key, reading))
+                if not reading.published:
+                    continue  # held: the published value stays
+                value = _counted(point, value, reading)
             if key not in self.values or self.values[key] != value:
                 changed.add(key)
             self.values[key] = value
         return frozenset(changed)
+
+    # --- counters ------------------------------------------------------------------------
+
+    def take_counter_news(self) -> list[tuple[str, Reading]]:
+        """The counter readings held, wrapped or reset since the last call."""
+        news, self.counter_news = self.counter_news, []
+        return news
+
+    def seed_counters(self, document: dict[str, object]) -> frozenset[str]:
+        """Take the counters' values from the device document published before a restart
+        (and the total counters' ``last_reset``); return the keys whose value it changed."""
+        changed: set[str] = set()
+        for key, counter in self.counters.items():
+            value = document.get(key)
+            if counter.seed(value) and self.values.get(key) != value:  # type: ignore[arg-type]
+                self.values[key] = value  # type: ignore[assignment]
+                changed.add(key)
+        resets = document.get("last_reset")  # a total counter's, kept as it was
+        if isinstance(resets, dict):
+            for key, when in resets.items():
+                if key in self.counters and isinstance(when, str) and len(when) <= 40:
+                    self.last_reset.setdefault(key, when)
+        return frozenset(changed)
+
+    def carry_counters(self, earlier: DeviceState) -> frozenset[str]:
+        """Take the counters' published values from the state a mapping reload replaces
+        (a counter the new mapping still has goes on from there)."""
+        document: dict[str, object] = {k: c.published for k, c in earlier.counters.items()}
+        return self.seed_counters(document | {"last_reset": dict(earlier.last_reset)})
 
     # --- what the device refused ---------------------------------------------------------
 
@@ -175,3 +223,13 @@ class DeviceState:
             f"{table.value} {printed_address(points, table, wire, self.protocol)} (wire {wire})"
             for table, wire in sorted(addresses)
         )
+
+
+def _counted(point: Point, read: Value, reading: Reading) -> Value:
+    """What a counter publishes: the value as decoded on a plain rise, else the counter's
+    value (a rollover's continuation, a reset) in the decoded value's type and decimals."""
+    if reading.kind in (Kind.FIRST, Kind.RISE) or reading.value is None:
+        return read
+    if isinstance(read, int) and float(reading.value).is_integer():
+        return int(reading.value)
+    return round(reading.value, point.entity.decimals)

@@ -46,8 +46,11 @@ A counter lower than before (a device rebuilt with fresh counters) counts from z
                                          EEPROM rate limit)
           "writes_failed": 0,          the device or bus did not complete the write
           "writes_expired": 0,         not sent before the command expiry
-          "unknown_codes": 0           enum codes read that the mapping has no label for
+          "unknown_codes": 0,          enum codes read that the mapping has no label for
                                          (published as code_<n>), counted as they appear
+          "counter_readings_held": 0,  counter readings below the published value (a 0,
+                                         a torn read, jitter) or failed, not published
+          "counter_resets": 0          counter decreases confirmed and published
         }
       }
     }
@@ -107,6 +110,8 @@ class DeviceSnapshot:
     backoff: float = 0.0
     writes: WriteSnapshot = WriteSnapshot()
     unknown_codes: int = 0
+    counter_readings_held: int = 0
+    counter_resets: int = 0
 
     @property
     def state(self) -> str:
@@ -216,6 +221,8 @@ def _device_report(device: DeviceSnapshot, snapshot: Snapshot) -> dict[str, Any]
         "writes_failed": writes.failed,
         "writes_expired": writes.expired,
         "unknown_codes": device.unknown_codes,
+        "counter_readings_held": device.counter_readings_held,
+        "counter_resets": device.counter_resets,
     }
 
 

@@ -525,11 +525,11 @@ def advance(
     return changes
 
 
-def _rolled_over(mover: Mover, target: float, image: Image) -> dict[Cell, int]:
+def _rolled_over(mover: Mover, target: Value, image: Image) -> dict[Cell, int]:
     """A counter past its width starts again from 0, as a device's does; nothing else
     moves past what its register holds."""
     width = counter_width(mover.point) if mover.counter else None
-    if width is None:
+    if width is None or not isinstance(target, int | float):
         return {}
     with contextlib.suppress(ValueRejectedError):
         return words_for(mover.point, target - width * abs(mover.point.entity.scale), image)

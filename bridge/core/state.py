@@ -6,9 +6,9 @@ labels, unknown as null), plus ``status`` (the value of the mapping's status ent
 label of each fault code that is not normal, ``<key>_<n>`` for a code the mapping has no
 label for: an unknown code is still an active fault), and where the device has counters
 it starts again by design (state class ``total``), ``last_reset``: when each count began,
-as far as the bridge knows (``NEVER_RESET`` until it sees a reset). Secret and write-only entities are
-never in it. ``<base>/<device>/<key>`` carries the plain value: JSON for numbers, booleans and
-null (``23.5``, ``true``, ``null``), the bare text for labels and text.
+as far as the bridge knows (``NEVER_RESET`` until it sees a reset). Secret and write-only
+entities are never in it. ``<base>/<device>/<key>`` carries the plain value: JSON for
+numbers, booleans and null (``23.5``, ``true``, ``null``), the bare text for labels and text.
 """
 
 from __future__ import annotations

@@ -105,8 +105,9 @@ class Engine:
         self, device_id: str, mapping: Mapping, device: DeviceConfig | None = None
     ) -> DevicePoller:
         """Poll ``device_id`` with ``mapping`` (and ``device``'s settings if given) from now
-        on: its poller starts afresh (values, health and learnt refusals; the write spacing
-        and the guard carry over); the bus and the other devices carry on untouched."""
+        on: its poller starts afresh (values, health and learnt refusals; the write spacing,
+        the guard and the counters' published values carry over); the bus and the other
+        devices carry on untouched."""
         old = self.device(device_id)
         task = self._tasks.pop(device_id, None)
         if task is not None:
@@ -115,6 +116,7 @@ class Engine:
                 await task
         poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         poller.writer.inherit(old.writer)
+        poller.state.carry_counters(old.state)
         self.devices[device_id] = poller
         if self._group is not None:
             self._tasks[device_id] = self._group.create_task(
@@ -186,4 +188,6 @@ def device_snapshot(poller: DevicePoller) -> DeviceSnapshot:
             expired=writes.expired,
         ),
         unknown_codes=poller.unknown_codes,
+        counter_readings_held=poller.counter_readings_held,
+        counter_resets=poller.counter_resets,
     )

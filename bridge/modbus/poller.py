@@ -22,9 +22,11 @@ import logging
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from datetime import UTC, datetime
 
 from bridge.config import DeviceConfig
 from bridge.core.codec import Value, is_unknown_code
+from bridge.core.counters import Kind, Reading
 from bridge.core.device_state import DeviceState
 from bridge.core.entity import PollClass
 from bridge.core.guard import UNGUARDED, Guard
@@ -78,6 +80,7 @@ class DevicePoller:
             timing=timing,
             recheck=policy.refusal_recheck,
             guard=guard,  # what earlier mappings guarded
+            confirm=device.counter_confirm,
         )
         self.link = DeviceLink(
             device,
@@ -96,6 +99,9 @@ class DevicePoller:
         self.first_poll_done = False  # every class was asked once (answered or not)
         self.unknown_codes = 0  # enum codes read that the mapping has no label for
         self._unknown_logged: set[tuple[str, Value]] = set()
+        self.counter_readings_held = 0  # counter readings not published (counters.py)
+        self.counter_resets = 0
+        self._held_logged: set[tuple[str, str]] = set()
 
     # --- what the device knows and how it is reached (for readers of the poller) --------
 
@@ -262,12 +268,71 @@ class DevicePoller:
         changed = self.state.decode_fresh(keys, fresh)
         if changed:
             self.values_changed(changed)
+        else:
+            self._counter_news()
 
     def values_changed(self, changed: frozenset[str]) -> None:
-        """Count the new unknown enum codes among ``changed``, then notify ``on_update``."""
+        """Count the new unknown enum codes among ``changed`` and the counters' news, then
+        notify ``on_update``."""
         for key in changed:
             self._count_unknown(self.points[key], self.values[key])
+        self._counter_news()
         self._notify(changed)
+
+    def seed_counters(self, document: dict[str, object]) -> None:
+        """The device's counters as published before this start (its retained document):
+        a lower first reading is then held like any other (bridge/core/counters.py)."""
+        changed = self.state.seed_counters(document)
+        if changed:
+            log.info(
+                "%s: counters carried on from the last published state: %s",
+                self.device.id,
+                ", ".join(f"{k} {self.values[k]}" for k in sorted(changed)),
+            )
+            self._notify(changed)
+
+    def _counter_news(self) -> None:
+        """Count and log the counter readings held back, rolled over or reset; a total
+        counter's confirmed reset starts its ``last_reset``."""
+        for key, reading in self.state.take_counter_news():
+            if reading.kind is Kind.HELD:
+                self.counter_readings_held += 1
+                self._log_held(key, reading)
+            elif reading.kind is Kind.RESET:
+                self.counter_resets += 1
+                log.warning(
+                    "%s: %s went back from %s to %s, %d lower readings in a row: "
+                    "published as a reset",
+                    self.device.id,
+                    key,
+                    reading.before,
+                    reading.value,
+                    self.state.counters[key].rule.confirm,
+                    extra={"event": "counter_reset", "key": key},
+                )
+                if self.points[key].entity.ha.state_class == "total":
+                    self.state.last_reset[key] = datetime.now(UTC).isoformat(timespec="seconds")
+            elif reading.kind is Kind.WRAP:
+                log.info("%s: %s rolled over; counted on at %s", self.device.id, key, reading.value)
+
+    def _log_held(self, key: str, reading: Reading) -> None:
+        """Once per key and reason at WARNING (then at DEBUG): what was read, what stays."""
+        first = (key, reading.reason) not in self._held_logged
+        self._held_logged.add((key, reading.reason))
+        log.log(
+            logging.WARNING if first else logging.DEBUG,
+            "%s: %s read %s (%s) below %s: not published, %s stays until the count goes on "
+            "or the same lower value is read %d times in a row%s",
+            self.device.id,
+            key,
+            reading.read,
+            reading.reason,
+            reading.before,
+            reading.before,
+            self.state.counters[key].rule.confirm,
+            "" if not first else " (said once per counter and cause; counted in bridge/health)",
+            extra={"event": "counter_held", "key": key},
+        )
 
     def _count_unknown(self, point: Point, value: Value) -> None:
         """Count an enum code the mapping has no label for as it appears (published as

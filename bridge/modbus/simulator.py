@@ -256,12 +256,19 @@ class _Device:
             self.image[(Table.HOLDING, write.address)] = unlock.success
 
     def _misread(self, table: Table, address: int, count: int) -> dict[Cell, int]:
-        """The next counter fault's answer when this read covers all of its cells."""
-        if self.misreads and all(
-            t is table and address <= a < address + count for t, a in self.misreads[0]
-        ):
-            return self.misreads.pop(0)
-        return {}
+        """What the next counter fault answers for the cells this read covers (a device
+        that reads one register per request meets a two-word misread in two reads)."""
+        if not self.misreads:
+            return {}
+        pending = self.misreads[0]
+        covered = {
+            c: v for c, v in pending.items() if c[0] is table and address <= c[1] < address + count
+        }
+        for cell in covered:
+            del pending[cell]
+        if not pending:
+            self.misreads.pop(0)
+        return covered
 
     def _refusal(self, function_code: int) -> int | None:
         """The exception any request gets from this unit now: its quirk, or 01."""

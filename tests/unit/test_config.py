@@ -139,6 +139,15 @@ devices:
             ("mapping: t1.yaml", "mapping: t1.yaml, poll: {fast: soon}"),
             "devices.pump.poll.fast: invalid duration 'soon'",
         ),
+        (  # issue 26: only a counter of the mapping takes a reset confirmation
+            ("mapping: t1.yaml", "mapping: soft_starter, counter_confirm: {current: 2}"),
+            "devices.pump.counter_confirm.current: not a counter of the mapping "
+            "(cumulative_run_time, current_run_time)",
+        ),
+        (
+            ("mapping: t1.yaml", "mapping: soft_starter, counter_confirm: {current_run_time: 0}"),
+            "devices.pump.counter_confirm.current_run_time: Input should be greater than or",
+        ),
         (("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, parity: X"), "buses.rs485.rtu.parity"),
         (  # a serial unit is one device: no unit to open for raw writes
             ("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, raw_units: [5]"),

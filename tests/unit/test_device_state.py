@@ -154,3 +154,74 @@ def test_addresses_are_shown_as_printed_and_as_sent() -> None:
     device = state()
     shown = device.shown({(H, 40), (H, 3), (H, 0)})  # the low word of energy; a hole
     assert shown == "holding 0x0001 (wire 0), holding 0x0004 (wire 3), holding 0x0029 (wire 40)"
+
+
+COUNTING = make_mapping(
+    {
+        "energy": {
+            "name": "Energy",
+            "address": 1,
+            "type": "u32",
+            "unit": "kWh",
+            "ha": {"device_class": "energy", "state_class": "total_increasing"},
+        },
+        "hours": {
+            "name": "Hours",
+            "address": 3,
+            "scale": 0.1,
+            "unit": "h",
+            "confirm_reset": 1,
+            "ha": {"device_class": "duration", "state_class": "total_increasing"},
+        },
+    },
+)
+
+
+def counted(device: DeviceState, energy: int, hours: int) -> frozenset[str]:
+    fresh: set[tuple[Table, int]] = set()
+    device.keep(Read(H, 1, 3), (energy >> 16, energy & 0xFFFF, hours), fresh)
+    return device.decode_fresh(["energy", "hours"], fresh)
+
+
+def test_a_counter_read_lower_keeps_its_value_and_says_so() -> None:
+    device = DeviceState(COUNTING, {}, timing=LinkTiming(), recheck=RECHECK)
+    assert counted(device, 19930, 1000) == {"energy", "hours"}
+    assert device.take_counter_news() == []
+    assert counted(device, 0, 1001) == {"hours"}  # energy held
+    assert device.values == {"energy": 19930, "hours": 100.1}
+    ((key, reading),) = device.take_counter_news()
+    assert (key, reading.kind, reading.reason, reading.read) == ("energy", "held", "zero", 0)
+    assert counted(device, 19931, 5) == {"energy", "hours"}  # hours: confirm_reset 1
+    assert device.values == {"energy": 19931, "hours": 0.5}
+    assert [(k, r.kind) for k, r in device.take_counter_news()] == [("hours", "reset")]
+
+
+def test_a_rollover_is_published_in_the_type_it_was_read_in() -> None:
+    device = DeviceState(COUNTING, {}, timing=LinkTiming(), recheck=RECHECK)
+    counted(device, 0xFFFFFFF0, 65530)
+    counted(device, 3, 2)
+    assert device.values == {"energy": 2**32 + 3, "hours": 6553.8}
+    assert isinstance(device.values["energy"], int)
+
+
+def test_seeds_are_what_a_lower_first_reading_is_held_against() -> None:
+    device = DeviceState(COUNTING, {}, timing=LinkTiming(), recheck=RECHECK)
+    changed = device.seed_counters(
+        {"energy": 19930, "hours": "x", "last_reset": {"energy": "2026-01-01T00:00:00+00:00"}}
+    )
+    assert changed == {"energy"} and device.values == {"energy": 19930}
+    assert device.last_reset == {"energy": "2026-01-01T00:00:00+00:00"}
+    counted(device, 0, 7)
+    assert device.values == {"energy": 19930, "hours": 0.7}
+    assert device.seed_counters({"energy": 100}) == frozenset()
+
+
+def test_a_reload_carries_the_counters_published() -> None:
+    earlier = DeviceState(COUNTING, {}, timing=LinkTiming(), recheck=RECHECK)
+    counted(earlier, 19930, 1000)
+    earlier.last_reset["hours"] = "2026-11-27T10:00:00+00:00"
+    device = DeviceState(COUNTING, {}, timing=LinkTiming(), recheck=RECHECK)
+    assert device.carry_counters(earlier) == {"energy", "hours"}
+    assert device.last_reset == {"hours": "2026-11-27T10:00:00+00:00"}
+    counted(device, 0, 1001)  # a misread right after the reload is held like any other
+    assert device.values == {"energy": 19930, "hours": 100.1}

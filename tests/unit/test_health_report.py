@@ -68,6 +68,8 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
         last_success=1119.5,
         writes=WriteSnapshot(done=3, skipped_unchanged=1, rejected=2, failed=1, expired=4),
         unknown_codes=5,
+        counter_readings_held=6,
+        counter_resets=1,
     )
     current = _snapshot(1120.0, buses=(bus,), devices=(device,))
 
@@ -110,6 +112,8 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
                 "writes_failed": 1,
                 "writes_expired": 4,
                 "unknown_codes": 5,
+                "counter_readings_held": 6,
+                "counter_resets": 1,
             }
         },
     }
