@@ -26,7 +26,13 @@ before calling the hook (simruntime.py:62-66), which would skip latency and quir
 * unit 0 is a device that answers every unit id no other unit has, as many Modbus TCP
   devices and gateways do (pymodbus' SimDevice id 0, simcore.py:36); its writes are
   recorded as unit 0;
-* ``two_byte_count``: the outgoing ``trace_packet`` hook rewrites RTU FC03 replies.
+* ``two_byte_count``: the outgoing ``trace_packet`` hook rewrites RTU FC03 replies;
+* counter faults (``counter_fault``, ``schedule``): the next reads of a counter answer
+  what ``bridge/core/simulation_counter.py`` says instead of the image.
+
+One module, about 500 lines, on purpose: it is the one place that reaches into pymodbus'
+server (its hooks, its SimDevice, its context variable), and every part of it is one of
+those hooks or what they call; the decisions themselves are in bridge/core.
 """
 
 from __future__ import annotations
