@@ -19,7 +19,7 @@ message it published. One bridge per base topic: before a connection says ``onli
 (else this one stands by without polling: bridge/core/instance.py), and a bridge that
 comes up beside this one later is told apart by the ``bridge/info`` it publishes. Before
 its first state, a session reads the device documents it left retained, so counters
-carry on across a restart (bridge/counter_seed.py).
+and alarm events carry on across a restart (bridge/carry_over.py).
 
 The wiring: the parts call back into the bridge, and every callback is named in
 ``__init__`` and ``run``:
@@ -51,6 +51,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from bridge import __version__
+from bridge.carry_over import carry_over
 from bridge.config import LoadedConfig, MetricsConfig
 from bridge.core.commands import check_size, error_document
 from bridge.core.discovery import (
@@ -62,7 +63,6 @@ from bridge.core.instance import Instance, instance_of, taken_message
 from bridge.core.management_request import response
 from bridge.core.state import compact
 from bridge.core.topics import Topics
-from bridge.counter_seed import carry_counters
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
 from bridge.errors import ValueRejectedError, first_of
@@ -217,7 +217,7 @@ class Bridge:
                 for wanted in self.subscriptions.wanted:
                     group.create_task(self.subscriptions.keep(client, wanted))
                 await check_alone(client, self.topics, self.instance)
-                await carry_counters(client, self.topics, self.engine)
+                await carry_over(client, self.topics, self.engine, self.state)
                 await client.announce()
                 self._polling()
                 # values, devices and info in one burst: one round trip, and no value waits

@@ -10,6 +10,12 @@ JSON, changed plain values and availability (on change only) in one burst, the d
 list when an availability changed, then the outbox. A command's read-back goes the same
 way (``again``). Every (re)connect, ``refresh`` and Home Assistant's ``online``
 (``home_assistant_online``) publish everything at once instead (``everything``).
+
+Alarm events (bridge/core/alarm_events.py) are found where the change comes in, not when
+it is sent: each raise and clear a poll sees is queued once on ``<base>/<device>/event``
+(kept in the outbox while the broker is away), against the alarms last said active, which
+``seed_alarms`` takes from the retained document at a start (bridge/carry_over.py). Until
+the first session has read that (``carried_over``), polls only mark their changes.
 """
 
 from __future__ import annotations
@@ -20,10 +26,13 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Coroutine
+from datetime import UTC, datetime
 from typing import Any
 
 from bridge.config import MqttConfig
+from bridge.core.alarm_events import alarm_events, event_document
 from bridge.core.discovery import Publish
+from bridge.core.discovery_alarms import alarm_names
 from bridge.core.state import compact, plain_payload, published, state_document
 from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
@@ -37,6 +46,7 @@ OUTBOX = 200  # non-retained messages kept while the broker is away
 HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
 HA_REPUBLISH_GAP = 30.0  # seconds at least between two republishes Home Assistant asks for
 STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
+MAX_SEEDED_ALARMS = 1000  # alarm names taken from a retained document, at most
 
 
 class StatePublisher:
@@ -66,13 +76,58 @@ class StatePublisher:
         self._info_due = False  # bridge/info again: another bridge overwrote it
         self._republish = False  # after a mapping reload: info, discovery and state
         self._ha_online = asyncio.Event()  # Home Assistant said online: republish soon
+        self._alarms: dict[str, frozenset[str]] = {}  # the alarms last said active
+        self._carried = False  # the first session read what a run before left retained
 
     # --- what the bridge asks for ---------------------------------------------------
 
     def changed(self, update: DeviceUpdate) -> None:
-        """A poll (or a write's read-back) changed these values: publish them."""
+        """A poll (or a write's read-back) changed these values: publish them, and an
+        event for each alarm they raise or clear."""
         self._dirty.setdefault(update.device_id, set()).update(update.changed)
+        if update.changed and self._carried:
+            self._alarm_events(update.device_id)
         self._wake.set()
+
+    def seed_alarms(self, device_id: str, document: dict[str, object]) -> None:
+        """The alarms a retained document said active, for a device this run has said
+        nothing of yet: an alarm already active before a restart does not fire again."""
+        alarms = document.get("alarms")
+        if device_id in self._alarms or not isinstance(alarms, list):
+            return
+        names = [a for a in alarms[:MAX_SEEDED_ALARMS] if isinstance(a, str) and len(a) <= 200]
+        self._alarms[device_id] = frozenset(names)
+
+    def carried_over(self) -> None:
+        """What a run before left retained is read (or there was none): from now on alarm
+        events are found, first against it for what the polls before found."""
+        if self._carried:
+            return
+        self._carried = True
+        for device_id in self.engine.devices:
+            self._alarm_events(device_id)
+
+    def _alarm_events(self, device_id: str) -> None:
+        poller = self.engine.devices.get(device_id)
+        if poller is None:
+            return
+        before = self._alarms.get(device_id, frozenset())
+        events, self._alarms[device_id] = alarm_events(poller.points, poller.values, before)
+        if not events:
+            return
+        entities = {key: point.entity for key, point in poller.points.items()}
+        names = alarm_names(entities, poller.device.display_name)
+        when = datetime.now(UTC).isoformat(timespec="milliseconds")
+        for event in events:
+            log.info(
+                "%s: %s %s",
+                device_id,
+                event.alarm,
+                event.state,
+                extra={"event": f"alarm_{event.state}", "alarm": event.alarm},
+            )
+            document = event_document(event, names.get(event.alarm, event.alarm), when)
+            self.queue(Publish(self.topics.event(device_id), compact(document), retain=False))
 
     def again(self, device_id: str) -> None:
         """Send the device's state (changed or not): after a read on request, or after

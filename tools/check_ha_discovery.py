@@ -54,7 +54,12 @@ except ImportError:
     import voluptuous as schema_lib  # type: ignore[import-not-found, no-redef]
 
 from homeassistant.components.mqtt import const as mqtt_const  # type: ignore[import-not-found]
-from homeassistant.components.mqtt import discovery, schemas  # type: ignore[import-not-found]
+from homeassistant.components.mqtt import (  # type: ignore[import-not-found]
+    device_automation,
+    device_trigger,
+    discovery,
+    schemas,
+)
 from homeassistant.components.number import const as number_const  # type: ignore[import-not-found]
 from homeassistant.components.sensor import DEVICE_CLASS_STATE_CLASSES  # type: ignore[import-not-found]
 from homeassistant.const import __version__ as ha_version  # type: ignore[import-not-found]
@@ -131,6 +136,9 @@ class Checker:
 
     def check_component(self, where: str, platform: str, config: dict[str, Any]) -> None:
         self.components += 1
+        if platform == "device_automation":
+            self.check_trigger(where, config)
+            return
         module = importlib.import_module(f"homeassistant.components.mqtt.{platform}")
         try:
             validated = module.DISCOVERY_SCHEMA(json.loads(json.dumps(config)))
@@ -145,6 +153,24 @@ class Checker:
             self.problem(where, f"{platform} ignores {', '.join(dropped)}")
         self.check_entity_rules(where, platform, validated)
         self.check_template(where, platform, validated)
+
+    def check_trigger(self, where: str, config: dict[str, Any]) -> None:
+        """A device trigger: the automation type's schema lets anything through, the
+        trigger's own schema (mqtt/device_trigger.py) is what Home Assistant applies."""
+        try:
+            device_automation.DISCOVERY_SCHEMA(json.loads(json.dumps(config)))
+            validated = device_trigger.TRIGGER_DISCOVERY_SCHEMA(json.loads(json.dumps(config)))
+        except schema_lib.Invalid as exc:
+            self.problem(where, f"device trigger refused: {exc}")
+            return
+        # the device payload's shared options reach every component; a trigger has no use
+        # for availability and its schema drops it (as Home Assistant does)
+        shared = {*schemas.SHARED_OPTIONS, "origin", "device"}
+        dropped = sorted(set(config) - set(validated) - shared)
+        if dropped:
+            self.problem(where, f"device trigger ignores {', '.join(dropped)}")
+        key = (str(validated["type"]), str(validated["subtype"]))
+        self.unique_ids[("device_trigger", f"{where.split(':', 1)[0]} {key}")] += 1
 
     def check_entity_rules(self, where: str, platform: str, config: dict[str, Any]) -> None:
         self.unique_ids[(platform, str(config.get("unique_id")))] += 1
@@ -194,8 +220,8 @@ class Checker:
                 return
             self.unique_ids.clear()
         for key, component in case["discovery"]["cmps"].items():
-            if "value_template" not in component:
-                continue
+            if "value_template" not in component or component["platform"] == "device_automation":
+                continue  # a trigger reads the event topic, not the state
             config = {k: v for k, v in component.items() if k != "platform"}
             module = importlib.import_module(
                 f"homeassistant.components.mqtt.{component['platform']}"

@@ -26,7 +26,9 @@ from bridge.core.protocol import OptionSpec, Protocol, write_function
 from bridge.core.variant import option_combinations, when_matches
 
 KEY_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
-RESERVED_KEYS = frozenset({"status", "alarms", "availability", "set", "get", "error"})
+RESERVED_KEYS = frozenset(
+    {"status", "alarms", "availability", "set", "get", "error", "event", "last_reset"}
+)
 _UNSIGNED_MAX = {DataType.U32: 0xFFFFFFFF, DataType.S32: 0xFFFFFFFF, DataType.F32: 0xFFFFFFFF}
 
 

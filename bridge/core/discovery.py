@@ -44,7 +44,7 @@ from typing import Any, Literal
 
 from bridge import __version__
 from bridge.core.codec import Value
-from bridge.core.discovery_alarms import alarms_config
+from bridge.core.discovery_alarms import alarm_event_components, alarms_config
 from bridge.core.discovery_entity import (
     QOS,
     ComponentContext,
@@ -157,7 +157,7 @@ def device_components(
     mapping: Mapping, options: AnyMapping[str, str], context: ComponentContext
 ) -> dict[str, Config]:
     """Every component of one device, by key: entities (the status entity among them),
-    then ``alarms``."""
+    then ``alarms``, the alarm events and their device triggers."""
     active = mapping.active(dict(options))
     components: dict[str, Config] = {}
     for key, entity in active.items():
@@ -166,6 +166,7 @@ def device_components(
             components[key] = config
     if any(entity.alarm for entity in active.values()):
         components[ALARMS_KEY] = alarms_config(context, active)
+        components |= alarm_event_components(context, active)
     return components
 
 

@@ -1,10 +1,15 @@
-"""The ``alarms`` component of a device: the active alarms by name. Pure.
+"""The ``alarms`` component of a device, its alarm events and device triggers. Pure.
 
 The state document's ``alarms`` lists keys (an alarm bit's key, a fault code's label,
 ``<key>_<n>`` for a code without a label; see ``state``): what MQTT clients and
 automations match. Home Assistant shows the names a person reads instead ("Dry running,
 Motor overcurrent"), from a table of names in the template, and keeps the keys in the
 attribute ``keys``.
+
+Each raise and clear also goes to ``<base>/<device>/event`` (bridge/core/alarm_events.py):
+the ``alarm_events`` event entity lists every ``<alarm>_raised`` / ``<alarm>_cleared`` it
+can carry, and each of them is a device trigger too (``type`` raised or cleared,
+``subtype`` the alarm's name), so an automation picks "Dry running raised" from a list.
 """
 
 from __future__ import annotations
@@ -12,16 +17,21 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping as AnyMapping
 
+from bridge.core.alarm_events import CLEARED, RAISED, event_type, other
 from bridge.core.discovery_entity import (
+    QOS,
     TEXT_MAX,
     ComponentContext,
     Config,
     base_config,
+    object_id,
     shown_name,
 )
 from bridge.core.entity import Component, Entity, PollClass
 
 ALARM_KEYS_TEMPLATE = "{{ {'keys': value_json.alarms} | tojson }}"
+EVENTS_KEY = "alarm_events"
+EVENT_TYPE_TEMPLATE = "{{ value_json.event_type }}"
 
 
 def alarms_config(context: ComponentContext, active: AnyMapping[str, Entity]) -> Config:
@@ -71,3 +81,41 @@ def alarms_template(names: AnyMapping[str, str]) -> str:
         f"{{% set n = {table} %}}{{% set text %}}{{% for k in value_json.alarms %}}{each}"
         f"{{% endfor %}}{{% endset %}}{{{{ (text or 'none')[:{TEXT_MAX}] }}}}"
     )
+
+
+def alarm_event_components(context: ComponentContext, active: AnyMapping[str, Entity]) -> Config:
+    """The ``alarm_events`` event entity and two device triggers per alarm (raised,
+    cleared), all reading ``<base>/<device>/event``; none for a device without alarms."""
+    names = alarm_names(active, context.device_name)
+    if not names:
+        return {}
+    for key, entity in active.items():  # codes the mapping has no label for
+        if entity.alarm and entity.enum is not None:
+            names[other(key)] = f"{shown_name(entity.name, context.device_name)}: other code"
+    topic = context.topics.event(context.device_id)
+    components: Config = {
+        EVENTS_KEY: {
+            "platform": "event",
+            "unique_id": f"{context.unique_prefix}_{EVENTS_KEY}",
+            "default_entity_id": f"event.{object_id(EVENTS_KEY, context)}",
+            "name": "Alarm events",
+            "qos": QOS,
+            "enabled_by_default": True,
+            "icon": "mdi:alert-circle-outline",
+            "state_topic": topic,
+            "event_types": [event_type(a, s) for a in names for s in (RAISED, CLEARED)],
+        }
+    }
+    for alarm, name in names.items():
+        for state in (RAISED, CLEARED):
+            components[f"{event_type(alarm, state)}_trigger"] = {
+                "platform": "device_automation",
+                "automation_type": "trigger",
+                "topic": topic,
+                "value_template": EVENT_TYPE_TEMPLATE,
+                "payload": event_type(alarm, state),
+                "type": state,
+                "subtype": name,
+                "qos": QOS,
+            }
+    return components

@@ -106,6 +106,10 @@ class Topics:
     def error(self, device_id: str) -> str:
         return f"{self.base}/{device_id}/error"
 
+    def event(self, device_id: str) -> str:
+        """Alarms raised and cleared, one JSON message per transition (not retained)."""
+        return f"{self.base}/{device_id}/event"
+
     def device_config(self, device_id: str) -> str:
         return f"{self.discovery_prefix}/device/{device_id}/config"
 

@@ -148,13 +148,17 @@ async def test_discovery_availability_and_state_for_every_device(mosquitto: Brok
             assert config["origin"]["name"] == "modbus-mqtt-bridge"
             assert config["availability_mode"] == "all"
             for key, component in config["cmps"].items():
+                if component["platform"] == "device_automation":  # an alarm's trigger
+                    assert component["topic"] == f"modbus/{name}/event", key
+                    continue
                 # the device's own entities, and its health sensors (their unique ids from
                 # when they sat on the bridge's device, kept so their history stays)
                 owners = (f"modbus_{name}_", f"modbus_bridge_device_{name}_")
                 assert component["unique_id"].startswith(owners), key
                 assert "object_id" not in component, key
-                # the health sensors read the bridge's health report
-                topics = (f"modbus/{name}", "modbus/bridge/health")
+                # the health sensors read the bridge's health report, the alarm events
+                # entity the device's events
+                topics = (f"modbus/{name}", "modbus/bridge/health", f"modbus/{name}/event")
                 assert component.get("state_topic", f"modbus/{name}") in topics, key
             await eventually(  # units and limits read from registers land in discovery
                 lambda p=poller, t=topic: (

@@ -237,6 +237,7 @@ async def test_an_unanswered_subscription_is_asked_again_and_state_goes_out_mean
                 await eventually(lambda: observer.retained.get(watched[0]) == b"online", 10)
                 assert bridge.subscriptions.states["commands"] == "pending"
                 await eventually(lambda: bridge.subscriptions.states["commands"] == "live", 10)
+                await eventually(lambda: watched[1] in observer.retained, 10)
                 health = observer.json(watched[1])
                 assert set(health["mqtt"]["subscriptions"]) == {
                     "commands",

@@ -40,7 +40,8 @@ def components(
         fast_interval=2.0,
         slow_interval=60.0,
     )
-    return dict(build_device_discovery(device, TOPICS, Origin(), health=True)["cmps"])
+    cmps = build_device_discovery(device, TOPICS, Origin(), health=True)["cmps"]
+    return {k: c for k, c in cmps.items() if c["platform"] != "device_automation"}  # entities
 
 
 def reason_for(mapping: Mapping, options: dict[str, str], key: str) -> str | None:

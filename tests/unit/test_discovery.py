@@ -598,7 +598,14 @@ def test_the_status_entity_is_published_once_as_itself() -> None:
         "trip": {"name": "Trip", "address": 1, "bit": 0, "alarm": True},
     }
     cmps = _cmps(entities, mapping_status="state")
-    assert list(cmps) == ["state", "trip", "alarms"]
+    assert list(cmps) == [
+        "state",
+        "trip",
+        "alarms",
+        "alarm_events",  # the alarm's events and device triggers (test_alarm_events.py)
+        "trip_raised_trigger",
+        "trip_cleared_trigger",
+    ]
     assert cmps["state"] == _ids("sensor", "state") | {
         "name": "State",
         "enabled_by_default": True,
@@ -905,7 +912,11 @@ def test_an_entity_id_does_not_repeat_the_device_id() -> None:
         "genset_alarms": {"name": "Alarm word", "address": 5},
     }
     cmps = _cmps(entities, id="genset", name="Standby genset")
-    ids = {key: (c["unique_id"], c["default_entity_id"]) for key, c in cmps.items()}
+    ids = {
+        key: (c["unique_id"], c["default_entity_id"])
+        for key, c in cmps.items()
+        if c["platform"] != "device_automation"  # a trigger is no entity: no ids
+    }
     assert ids == {
         "genset_status": ("modbus_genset_genset_status", "sensor.genset_status"),
         "genset_mode": ("modbus_genset_genset_mode", "sensor.genset_genset_mode"),
@@ -914,6 +925,7 @@ def test_an_entity_id_does_not_repeat_the_device_id() -> None:
         "trip": ("modbus_genset_trip", "binary_sensor.genset_trip"),
         "genset_alarms": ("modbus_genset_genset_alarms", "sensor.genset_genset_alarms"),
         "alarms": ("modbus_genset_alarms", "sensor.genset_alarms"),
+        "alarm_events": ("modbus_genset_alarm_events", "event.genset_alarm_events"),
     }
     dashed = _cmps({"main_drive_speed": {"name": "Speed", "address": 0}}, id="main-drive")
     assert dashed["main_drive_speed"]["default_entity_id"] == "sensor.main_drive_speed"

@@ -72,8 +72,8 @@ def problems(case: Case) -> list[str]:
     json.dumps(case.state, allow_nan=False)
     found = []
     for key, config in case.discovery["cmps"].items():
-        if "value_template" not in config:
-            continue
+        if "value_template" not in config or config["platform"] == "device_automation":
+            continue  # a device trigger reads the event topic, not the state
         text = rendered(config["value_template"], case.state)
         why = refusal(config["platform"], config, text)
         if why:
