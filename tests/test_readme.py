@@ -21,6 +21,8 @@ from bridge.core.yaml_source import parse_yaml
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
 BLOCKS = re.findall(r"```yaml\n(.*?)```", README, flags=re.DOTALL)
+# the mapping example is the block that declares entities (the automations are YAML too)
+MAPPING_BLOCK = next(block for block in BLOCKS if "\nentities:" in f"\n{block}")
 
 
 def test_readme_config_example_is_valid() -> None:
@@ -30,7 +32,7 @@ def test_readme_config_example_is_valid() -> None:
 
 
 def test_readme_mapping_example_is_valid_and_decodes() -> None:
-    mapping = parse_mapping(BLOCKS[1], "README mapping")
+    mapping = parse_mapping(MAPPING_BLOCK, "README mapping")
     points = mapping.points()
     image = {(Table.HOLDING, 0x97): 35, (Table.HOLDING, 0x57): 0}
     assert decode(points["actual_value"], image) == 3.5
@@ -116,3 +118,16 @@ def test_the_demo_fault_command_names_a_real_device_and_alarm() -> None:
     seed = next(s for s in SEEDS if s.id == body["device"])
     mapping = load_mapping(builtin_mapping_path(seed.mapping))
     assert mapping.entities[body["fault"]].alarm
+
+
+def test_readme_automations_are_home_assistant_yaml_for_the_bridge_s_triggers() -> None:
+    """The automation examples use the trigger and event the bridge publishes."""
+    automations = [block for block in BLOCKS if block.startswith("automation:")]
+    assert len(automations) == 2
+    device, event = (
+        parse_yaml(block, "README automation")["automation"][0] for block in automations
+    )
+    trigger = device["triggers"][0]
+    assert (trigger["trigger"], trigger["domain"], trigger["type"]) == ("device", "mqtt", "raised")
+    assert trigger["subtype"] == "Dry running"  # the name of nastec_vasco's alarm_dry_running
+    assert event["triggers"][0]["entity_id"].endswith("_alarm_events")
