@@ -87,7 +87,8 @@ def _components() -> dict[str, dict[str, Any]]:
     components = {}
     for message in messages:
         for component in json.loads(message.payload)["cmps"].values():
-            components[component["default_entity_id"]] = component
+            if component["platform"] != "device_automation":  # a trigger is no entity
+                components[component["default_entity_id"]] = component
     return components
 
 

@@ -127,8 +127,8 @@ def assert_true_values(
     count = 0
     for document in documents:
         for key, value in document.items():
-            if key == "alarms" or value is None:
-                continue
+            if key in ("alarms", "last_reset") or value is None:
+                continue  # not register values: the active alarms, when counts began
             held = sim.value(unit, status if key == "status" and status else key)
             assert value == held or value in (also or {}).get(key, set()), (
                 f"unit {unit}: {key} published as {value!r}, the device holds {held!r}"
