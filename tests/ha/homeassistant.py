@@ -5,7 +5,9 @@ testing chroot (``~/.cache/modbus-mqtt-bridge/ha-forky/opt/ha-<version>``); ``Ho
 (``chroot ROOT /opt/ha-<version>/bin/hass -c DIR``) with a config folder in the chroot's
 /tmp, onboards a user over HTTP for an access token, sets up the MQTT integration through
 its config flow against the test's broker, and answers websocket commands (the entity and
-device registries, the states). ``log_records()`` parses ``home-assistant.log`` into
+device registries, the states, the recorder's statistics). ``integrations`` adds
+integrations to configuration.yaml (``("recorder",)`` for long-term statistics: the
+harness's own config loads no recorder). ``log_records()`` parses ``home-assistant.log`` into
 records (a record's continuation lines, a traceback, belong to it): Home Assistant 2025.x
 writes ``2025-11-27 19:00:00.123 WARNING (MainThread) [logger] message``, 2026.x adds
 the UTC offset to the time (``19:00:00.123+00:00``).
@@ -127,6 +129,7 @@ def form_answer(schema: list[dict[str, Any]], given: dict[str, Any]) -> dict[str
 class HomeAssistant:
     root: Path  # the chroot
     version: str
+    integrations: tuple[str, ...] = ()  # loaded besides the harness's own, with no options
     port: int = 0
     workdir: Path | None = None
     process: subprocess.Popen[bytes] | None = None
@@ -155,7 +158,10 @@ class HomeAssistant:
         tmp.mkdir(exist_ok=True)
         self.workdir = Path(tempfile.mkdtemp(prefix="ha-", dir=tmp))
         self.port = free_port()
-        (self.workdir / "configuration.yaml").write_text(CONFIGURATION.format(port=self.port))
+        extra = "".join(f"{name}:\n" for name in self.integrations)
+        (self.workdir / "configuration.yaml").write_text(
+            CONFIGURATION.format(port=self.port) + extra
+        )
         inside = "/" + str(self.workdir.relative_to(self.root))
         hass = f"/opt/ha-{self.version}/bin/hass"
         with (self.workdir / "stdout.log").open("wb") as output:
@@ -286,6 +292,23 @@ class HomeAssistantSocket:
 
     async def states(self) -> dict[str, dict[str, Any]]:
         return {s["entity_id"]: s for s in await self.call("get_states")}
+
+    async def statistics(
+        self, statistic_ids: list[str], start: str, period: str = "5minute"
+    ) -> dict[str, list[dict[str, Any]]]:
+        """The recorder's compiled statistics (``sum`` and ``state``) of ``statistic_ids``
+        from ``start`` (ISO 8601), one row per ``period``: statistic id -> rows in time
+        order, each with ``start`` and ``end`` in epoch milliseconds; an id with nothing
+        compiled yet is absent."""
+        return dict(
+            await self.call(
+                "recorder/statistics_during_period",
+                start_time=start,
+                statistic_ids=statistic_ids,
+                period=period,
+                types=["sum", "state"],
+            )
+        )
 
     async def close(self) -> None:
         await self.connection.close()
