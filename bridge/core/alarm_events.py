@@ -102,12 +102,13 @@ def _event(name: str, raised: bool, key: str, points: AnyMapping[str, Point]) ->
 def event_document(event: AlarmEvent, name: str, when: str) -> dict[str, object]:
     """The JSON of one transition: ``event_type`` first (Home Assistant's event entity
     reads it; the other keys become its attributes), the alarm's key and the name a person
-    reads, raised or cleared, the entity and raw code, and when the bridge saw it."""
+    reads, the transition (raised or cleared: not ``state``, which Home Assistant's entity has
+    already), the entity and raw code, and when the bridge saw it."""
     return {
         "event_type": event.event_type,
         "alarm": event.alarm,
         "name": name,
-        "state": event.state,
+        "transition": event.state,
         "entity": event.key,
         "code": event.code,
         "time": when,

@@ -260,7 +260,7 @@ async def make_automation(
                 "action": "mqtt.publish",
                 "data": {
                     "topic": RUNS_TOPIC,
-                    "payload": "{{ trigger.payload_json.name }} {{ trigger.payload_json.state }}",
+                    "payload": "{{ trigger.payload_json.name }} {{ trigger.payload_json.transition }}",
                 },
             }
         ],

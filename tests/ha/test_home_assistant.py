@@ -123,6 +123,8 @@ def discovered(observer: Observer) -> dict[str, tuple[str, str]]:
     for topic, payload in observer.retained.items():
         if topic.startswith(f"{PREFIX}/device/") and payload:
             for component in json.loads(payload)["cmps"].values():
+                if component["platform"] == "device_automation":
+                    continue  # a device trigger is no entity (tests/ha/test_alarm_triggers.py)
                 components[component["unique_id"]] = (
                     component["platform"],
                     component["default_entity_id"],

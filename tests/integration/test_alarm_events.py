@@ -75,7 +75,7 @@ async def bridged(broker: Broker, sim: Simulator, folder: Path) -> AsyncIterator
 
 def events(observer: Observer, device: str) -> list[tuple[str, str]]:
     return [
-        (json.loads(m.payload)["alarm"], json.loads(m.payload)["state"])
+        (json.loads(m.payload)["alarm"], json.loads(m.payload)["transition"])
         for m in observer.log
         if m.topic == f"modbus/{device}/event"
     ]

@@ -84,7 +84,7 @@ def test_the_event_document() -> None:
         "event_type": "overload_raised",
         "alarm": "overload",
         "name": "Overload",
-        "state": "raised",
+        "transition": "raised",
         "entity": "fault",
         "code": 3,
         "time": "2026-11-27T22:00:00.000+00:00",
