@@ -252,3 +252,26 @@ async def test_a_restart_checks_the_first_reading_against_the_last_published(
         after.log = observer.log[mark:]
         for device, _, key in COUNTERS:
             assert set(published(after, device, key)) == {counted[key]}, key
+
+
+@pytest.mark.asyncio
+async def test_a_broker_restart_publishes_no_lower_count(mosquitto: Broker) -> None:
+    """The broker forgets everything (no persistence here); the devices misread meanwhile:
+    what the bridge sends again at its reconnect is the count it held, not a lower one."""
+    sim = counters_sim()
+    async with bridged(mosquitto, sim) as bridge:
+        async with observing(mosquitto, "modbus/#") as observer:
+            await settled(observer, sim)
+            counted = {key: sim.value(unit, key) for _, unit, key in COUNTERS}
+        mosquitto.stop()
+        await eventually(lambda: bridge.mqtt_state != "online", timeout=10)
+        for _, unit, key in COUNTERS:
+            sim.counter_fault(unit, key, "reboot")
+        await polls(4)
+        mosquitto.restart()
+        async with observing(mosquitto, "modbus/#") as observer:
+            await eventually(lambda: bridge.mqtt_state == "online", timeout=15)
+            await eventually(lambda: "modbus/genset" in observer.retained, timeout=10)
+            await polls(4)
+            for device, _, key in COUNTERS:
+                assert set(published(observer, device, key)) == {counted[key]}, key
