@@ -39,7 +39,7 @@ DOCUMENTS = [
     *sorted((ROOT / "docs").glob("*.md")),
     *sorted(p for p in (ROOT / "examples").rglob("*") if p.suffix in EXAMPLES),
 ]
-PLATFORMS = ("sensor", "binary_sensor", "switch", "number", "select", "button", "text")
+PLATFORMS = ("sensor", "binary_sensor", "switch", "number", "select", "button", "text", "event")
 ENTITY_ID = re.compile(rf"\b(?:{'|'.join(PLATFORMS)})\.[a-z0-9_]+\b")
 PREFIX = "homeassistant"
 BASE = "modbus"
