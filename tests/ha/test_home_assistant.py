@@ -279,7 +279,12 @@ async def test_a_command_select_shows_what_the_drive_does_not_the_last_choice(
     socket = await hass.websocket()
     command, status = "select.fan_drive_command", "sensor.fan_drive_status"
 
+    async def available() -> str:
+        state = (await socket.states()).get(command, {}).get("state")
+        return "" if state not in (None, "unavailable") else f"{command} is {state}"
+
     async def choose(option: str) -> None:
+        await until(available, 60)  # discovered is not yet available (its first state)
         await socket.call(
             "call_service",
             domain="select",
