@@ -22,7 +22,7 @@ Anything a broker answers that the protocol does not allow (a SUBACK with the wr
 number of codes, a packet paho cannot parse) ends the session with
 MqttDisconnectedError, so the reconnect loop starts a new one; it never ends the process.
 
-One piece, at about 450 lines: entering, serving and leaving share one connection and
+One piece, at about 470 lines: entering, serving and leaving share one connection and
 what the session promised on it (``announced``, ``retained_topics``, ``farewell``), and
 the way out is only correct read beside the way in.
 """
