@@ -13,13 +13,25 @@ process) read by a bare pymodbus client that does nothing with the values (the f
 any bridge on pymodbus), then by this bridge with its defaults (publishing to a private
 mosquitto). CPU is utime + stime of the process over the window.
 
+Publish (issue 27): the cost of one plain value (``mqtt.output: values``) against paho's
+own. The peers workload's 40 values as plain topics (``modbus/pump/<key>``, retained, QoS
+1, MQTT 5) in bursts of 40, each burst acknowledged before the next, to a private
+mosquitto: first by a bare paho client driving its own loop (``loop()``, TCP_NODELAY like
+the bridge's socket), then by the bridge's MQTT session (``MqttClient.publish_many``, the
+payloads made by ``plain_payload`` and the topics by ``Topics`` each burst, as
+``StatePublisher`` does). CPU is ``time.process_time()`` of this one process around each;
+the two alternate, ``--rounds`` times, and the medians are printed.
+
     .venv/bin/python bench/floor.py [--seconds 30]
+    .venv/bin/python bench/floor.py publish [--rounds 3] [--bursts 250]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -32,6 +44,11 @@ from latency import NodelayBroker
 from peer_configs import UNIT, registers, write_configs
 from scale import cpu_seconds, listening, process
 
+from bridge.config import MqttConfig
+from bridge.core.codec import Value
+from bridge.core.state import plain_payload
+from bridge.core.topics import Topics
+from bridge.mqtt import MqttClient
 from tests.integration.mosquitto import free_port
 
 BRIDGE = Path(sys.executable).with_name("modbus-mqtt-bridge")
@@ -138,6 +155,73 @@ async def cpu(folder: Path, seconds: float) -> None:
         print(f"| {label} | {figure:.2f} | {10 * figure / reads / PERIOD:.3f} |")
 
 
+def paho_floor(port: int, messages: list[tuple[str, str]], bursts: int) -> float:
+    """CPU seconds a bare paho client takes to publish ``messages`` ``bursts`` times, each
+    burst acknowledged (QoS 1, retained) before the next."""
+    import paho.mqtt.client as paho  # noqa: PLC0415 - only this part needs it
+
+    client = paho.Client(paho.CallbackAPIVersion.VERSION2, "floor", protocol=paho.MQTTv5)
+    acked = 0
+
+    def on_publish(*_: object) -> None:
+        nonlocal acked
+        acked += 1
+
+    client.on_publish = on_publish
+    client.connect("127.0.0.1", port)
+    client.socket().setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    while not client.is_connected():
+        client.loop(0.1)
+    start = time.process_time()
+    for _ in range(bursts):
+        due = acked + len(messages)
+        for topic, payload in messages:
+            client.publish(topic, payload, 1, True)
+        while acked < due:
+            client.loop(0.1)
+    spent = time.process_time() - start
+    client.disconnect()
+    return spent
+
+
+async def bridge_publish(url: str, values: dict[str, Value], bursts: int) -> float:
+    """CPU seconds the bridge's MQTT session takes for the same bursts, the plain topics
+    and payloads made as ``StatePublisher`` makes them."""
+    topics = Topics(base="modbus")
+    async with MqttClient(MqttConfig(url=url, qos=1), will_topic="bench/state") as client:
+        start = time.process_time()
+        for _ in range(bursts):
+            burst = [(topics.value("pump", k), plain_payload(v), True) for k, v in values.items()]
+            await client.publish_many(burst)
+        return time.process_time() - start
+
+
+async def publish_cost(rounds: int, bursts: int) -> None:
+    values: dict[str, Value] = {r.key: float(r.address) / 10 for r in registers()}
+    topics = Topics(base="modbus")
+    messages = [(topics.value("pump", k), plain_payload(v)) for k, v in values.items()]
+    count = bursts * len(messages)
+    floors, ours = [], []
+    with tempfile.TemporaryDirectory() as name:
+        broker = NodelayBroker(Path(name))
+        broker.start()
+        try:
+            for _ in range(rounds):
+                floors.append(1e6 * paho_floor(broker.port, messages, bursts) / count)
+                ours.append(1e6 * await bridge_publish(broker.url, values, bursts) / count)
+        finally:
+            broker.stop()
+    print(f"{bursts} bursts of {len(messages)} plain values, QoS 1, retained, MQTT 5; CPU us a")
+    print(f"message, each of {rounds} rounds and the median\n")
+    print("| publisher | rounds, us a message | median, us | vs paho |")
+    print("| --- | --- | ---: | ---: |")
+    floor = statistics.median(floors)
+    for label, found in (("bare paho client (the floor)", floors), ("this bridge", ours)):
+        each = ", ".join(f"{f:.0f}" for f in found)
+        median = statistics.median(found)
+        print(f"| {label} | {each} | {median:.0f} | {median / floor:.2f} |")
+
+
 async def main(seconds: float) -> None:
     with tempfile.TemporaryDirectory() as name:
         memory(Path(name))
@@ -147,6 +231,12 @@ async def main(seconds: float) -> None:
 if __name__ == "__main__":
     if sys.argv[1:2] == ["client"]:
         asyncio.run(bare_client(int(sys.argv[2]), float(sys.argv[3])))
+    elif sys.argv[1:2] == ["publish"]:
+        parser = argparse.ArgumentParser(description="the cost of a plain value (issue 27)")
+        parser.add_argument("--rounds", type=int, default=3)
+        parser.add_argument("--bursts", type=int, default=250)
+        options = parser.parse_args(sys.argv[2:])
+        asyncio.run(publish_cost(options.rounds, options.bursts))
     else:
         parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
         parser.add_argument("--seconds", type=float, default=30.0)

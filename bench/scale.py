@@ -19,12 +19,16 @@ from ``/proc/<pid>/stat``, % of one core), RSS (``VmRSS`` sampled every second,
 fast poll period achieved: per device, the configured 1 s scaled by the requests it
 should make over the requests it made in ``<base>/bridge/health`` (every 10 s).
 
-    .venv/bin/python bench/scale.py [seconds] [warm-up seconds]
+``--output`` sets ``mqtt.output`` (json, the default; values; both, as deploy/config.yaml
+has it) and ``--case`` keeps only the case of that label.
+
+    .venv/bin/python bench/scale.py [seconds] [warm-up seconds] [--output both] [--case TEXT]
     .venv/bin/python bench/scale.py profile [seconds]   # where the CPU goes (50 devices)
 """
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import collections
 import contextlib
@@ -100,8 +104,13 @@ def memory_kib(pid: int, name: str) -> int:
     raise KeyError(name)
 
 
-def bridge_config(
-    folder: Path, url: str, ports: list[int], units: int, poll: dict[str, float]
+def bridge_config(  # noqa: PLR0917 - the bench's own helper
+    folder: Path,
+    url: str,
+    ports: list[int],
+    units: int,
+    poll: dict[str, float],
+    output: str = "json",
 ) -> Path:
     """A config polling ``units`` soft starters behind each port, one bus per port."""
     buses = [
@@ -114,7 +123,7 @@ def bridge_config(
         for unit in range(1, units + 1)
     ]
     config = {
-        "mqtt": {"url": url, "base_topic": "modbus", "client_id": "bench-bridge"},
+        "mqtt": {"url": url, "base_topic": "modbus", "client_id": "bench-bridge", "output": output},
         "bridge": {"health_interval": HEALTH_INTERVAL},
         "buses": buses,
         "devices": devices,
@@ -223,6 +232,7 @@ async def bridge_process(  # noqa: PLR0917 - the bench's own helper
     ports: int,
     poll: dict[str, float],
     profile: Path | None = None,
+    output: str = "json",
 ) -> AsyncIterator[tuple[int, int]]:
     """The simulator (``units`` per port) and the bridge, each in its own process; yields
     their process ids once the bridge is started (under cProfile, writing ``profile``)."""
@@ -230,7 +240,7 @@ async def bridge_process(  # noqa: PLR0917 - the bench's own helper
     serve = [sys.executable, __file__, "serve", str(units), *map(str, chosen)]
     with process(serve, folder / "simulator.log") as sim:
         await listening(chosen)
-        config = bridge_config(folder, url, chosen, units, poll)
+        config = bridge_config(folder, url, chosen, units, poll, output)
         run = [str(BRIDGE), "run", "-c", str(config), "--log-level", "warning"]
         if profile is not None:
             run = [sys.executable, "-m", "cProfile", "-o", str(profile), *run]
@@ -254,13 +264,16 @@ async def listening(ports: list[int], within: float = 60.0) -> None:
             break
 
 
-async def run_case(units: int, ports: int, slow: float, warmup: float, seconds: float) -> Figures:
+async def run_case(  # noqa: PLR0917 - the bench's own helper
+    units: int, ports: int, slow: float, warmup: float, seconds: float, output: str
+) -> Figures:
     with tempfile.TemporaryDirectory() as name:
         broker = Broker(Path(name))
         broker.start()
         try:
             poll = {"fast": PERIOD, "slow": slow}
-            async with bridge_process(Path(name), broker.url, units, ports, poll) as pids:
+            folder = Path(name)
+            async with bridge_process(folder, broker.url, units, ports, poll, None, output) as pids:
                 return await measure_bridge(pids, broker.url, slow, warmup, seconds)
         finally:
             broker.stop()
@@ -329,12 +342,12 @@ async def serve(units: int, ports: list[int]) -> None:
 # --- report ------------------------------------------------------------------------------
 
 
-async def main(seconds: float, warmup: float) -> None:
+async def main(seconds: float, warmup: float, output: str, case: str) -> None:
     print(
         f"{MAPPING}, fast class every {PERIOD:g} s, settings every {PERIOD:g} s unless stated "
         f"(reads per device per second: {reads_per_second(PERIOD):.1f}, or "
         f"{reads_per_second(60):.1f}), Modbus TCP on loopback; {warmup:g} s warm-up, then "
-        f"{seconds:g} s measured\n"
+        f"{seconds:g} s measured; mqtt.output: {output}\n"
     )
     header = [
         *("case", "bridge CPU % of a core", "RSS max MiB", "peak RSS (VmHWM) MiB"),
@@ -344,7 +357,9 @@ async def main(seconds: float, warmup: float) -> None:
     print("| " + " | ".join(header) + " |")
     print("| --- |" + " ---: |" * (len(header) - 1))
     for label, units, ports, slow in CASES:
-        f = await run_case(units, ports, slow, warmup, seconds)
+        if case and label != case:
+            continue
+        f = await run_case(units, ports, slow, warmup, seconds, output)
         cells = [
             *(label, f"{f.cpu:.1f}", f"{f.rss_max:.1f}", f"{f.hwm:.1f}", f"{f.messages:.0f}"),
             *(f"{f.period_median:.2f}", f"{f.period_max:.2f}", f"{100 * f.utilisation:.0f}"),
@@ -359,5 +374,10 @@ if __name__ == "__main__":
     elif sys.argv[1:2] == ["profile"]:
         asyncio.run(profile(float(sys.argv[2]) if len(sys.argv) > 2 else 60.0))
     else:
-        numbers = [float(a) for a in sys.argv[1:3]]
-        asyncio.run(main(*(numbers + [60.0, 20.0][len(numbers) :])))
+        parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+        parser.add_argument("seconds", type=float, nargs="?", default=60.0)
+        parser.add_argument("warmup", type=float, nargs="?", default=20.0)
+        parser.add_argument("--output", choices=("json", "values", "both"), default="json")
+        parser.add_argument("--case", default="", help="only the case of this label")
+        a = parser.parse_args()
+        asyncio.run(main(a.seconds, a.warmup, a.output, a.case))

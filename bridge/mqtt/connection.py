@@ -21,6 +21,11 @@ sends at once (TCP_NODELAY).
   delivered;
 - retained messages matching a filter in ``collectors`` go there, every message on a topic
   in ``watchers`` goes there, the rest to the session's ``messages()``;
+- ``send`` hands a publish to paho and ``acknowledged`` waits for a whole burst's
+  acknowledgements at once (``Acknowledgements``: one event, counted down by aiomqtt's
+  ``_on_publish``), in place of aiomqtt's ``publish``: its task, event, ``wait_for`` and
+  two scans of every pending call per message cost as much CPU as paho itself
+  (bench/floor.py, issue 27);
 - a broker that closes the connection instead of answering the CONNECT ends the wait at
   once; a SUBACK or UNSUBACK given up on is a DEBUG line; a socket closed before asyncio
   registers its writer is skipped; ``wake_on_loss`` wakes every wait for an
@@ -71,6 +76,22 @@ class Received(aiomqtt.Message):
         )
         self.duplicate = bool(message.dup)
         self.received = time.monotonic()
+
+
+class Acknowledgements(asyncio.Event):
+    """The acknowledgements a burst of publishes waits for, as one event: it stands in
+    aiomqtt's ``_pending_publishes`` for each message, whose ``_on_publish`` (and
+    ``wake_on_loss``) call ``set()`` once per message; it is set when none is due."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.mids: list[int] = []
+        self.due = 0
+
+    def set(self) -> None:
+        self.due -= 1
+        if self.due <= 0:
+            super().set()
 
 
 class Connection(aiomqtt.Client):
@@ -164,6 +185,34 @@ class Connection(aiomqtt.Client):
                 self._loop.add_writer(fileno, write)
 
         self._loop.call_soon_threadsafe(register)
+
+    def send(
+        self, topic: str, payload: str | bytes, qos: int, retain: bool, acks: Acknowledgements
+    ) -> None:
+        """Hand one publish to paho; ``acks`` waits for it. ValueError for what paho
+        refuses (an invalid topic, a payload beyond 256 MB), aiomqtt.MqttCodeError when it
+        cannot be queued (not connected)."""
+        info = self._client.publish(topic, payload, qos, retain)
+        if info.rc != paho.MQTT_ERR_SUCCESS:
+            raise aiomqtt.MqttCodeError(info.rc, "Could not publish message")
+        if not info.is_published():
+            self._pending_publishes[info.mid] = acks
+            acks.mids.append(info.mid)
+            acks.due += 1
+
+    async def acknowledged(self, acks: Acknowledgements) -> None:
+        """Wait until the broker acknowledged every publish of ``acks`` (or the connection
+        was lost); aiomqtt.MqttError if that took longer than ``TIMEOUT``."""
+        try:
+            if acks.due > 0 and not self.lost:  # else woken already, or never
+                async with asyncio.timeout(self.timeout):
+                    await acks.wait()
+        except TimeoutError:
+            raise aiomqtt.MqttError("Operation timed out") from None
+        finally:
+            for mid in acks.mids:  # acknowledged ones are gone already
+                if self._pending_publishes.get(mid) is acks:
+                    del self._pending_publishes[mid]
 
     def send_at_once(self) -> None:
         """TCP_NODELAY on the socket. paho leaves Nagle's algorithm on, which holds a small

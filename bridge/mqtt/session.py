@@ -22,7 +22,7 @@ Anything a broker answers that the protocol does not allow (a SUBACK with the wr
 number of codes, a packet paho cannot parse) ends the session with
 MqttDisconnectedError, so the reconnect loop starts a new one; it never ends the process.
 
-One piece, at about 450 lines: entering, serving and leaving share one connection and
+One piece, at about 470 lines: entering, serving and leaving share one connection and
 what the session promised on it (``announced``, ``retained_topics``, ``farewell``), and
 the way out is only correct read beside the way in.
 """
@@ -47,6 +47,7 @@ from bridge.config import MqttConfig
 from bridge.mqtt.connection import (
     FAILURE,
     OFFLINE,
+    Acknowledgements,
     Connection,
     Received,
     connect,
@@ -56,6 +57,7 @@ from bridge.mqtt.errors import (
     BaseTopicTakenError,
     MqttConnectError,
     MqttDisconnectedError,
+    MqttError,
     MqttPublishError,
     MqttRefusedError,
     MqttUnackedError,
@@ -262,22 +264,51 @@ class MqttClient:
     ) -> None:
         """Publish (at ``mqtt.qos`` unless given) and, for QoS 1/2, wait for the broker's
         acknowledgement."""
+        await self._publish_all(((topic, payload, retain),), qos)
+
+    async def publish_many(self, messages: Iterable[tuple[str, str | bytes, bool]]) -> None:
+        """Publish (topic, payload, retain) messages all at once and wait for every
+        acknowledgement together: a burst (the whole state after a reconnect) costs one
+        round trip, not one per message. All of them are handed to the connection before
+        anything else may publish: sent in parts, a later part could overtake a newer
+        message on the same topic (an ``offline`` sent meanwhile, then the burst's
+        ``online``). A message paho refuses (MqttPublishError) does not stop the others."""
+        await self._publish_all(messages, None)
+
+    async def _publish_all(
+        self, messages: Iterable[tuple[str, str | bytes, bool]], qos: int | None
+    ) -> None:
+        """Hand every message to paho in order, then wait once for all acknowledgements
+        (one event for the burst, not a task, an event and a timeout per message: issue 27);
+        the first failure is raised once the others are acknowledged."""
         connection = self._require()
         level = self._config.qos if qos is None else qos
-        if retain and payload:
-            self.retained_topics.add(topic)
-        elif retain:
-            self.retained_topics.discard(topic)
+        acks = Acknowledgements()
+        first: MqttError | None = None
+        topic = ""
+        for topic, payload, retain in messages:
+            if retain and payload:
+                self.retained_topics.add(topic)
+            elif retain:
+                self.retained_topics.discard(topic)
+            try:
+                connection.send(topic, payload, level, retain, acks)
+            except aiomqtt.MqttError as exc:
+                first = first or MqttDisconnectedError(f"publish to {topic[:200]}: {exc}")
+            except ValueError as exc:  # paho: an invalid topic, a payload beyond 256 MB
+                first = first or MqttPublishError(f"cannot publish to {topic[:200]}: {exc}")
+        if first is not None and not acks.due:
+            raise first
         sent = time.monotonic()
         try:
-            await connection.publish(topic, payload, level, retain)
+            await connection.acknowledged(acks)
         except aiomqtt.MqttError as exc:
             raise MqttDisconnectedError(f"publish to {topic[:200]}: {exc}") from exc
-        except ValueError as exc:  # paho: an invalid topic, a payload beyond 256 MB
-            raise MqttPublishError(f"cannot publish to {topic[:200]}: {exc}") from None
         restore_lost_cancel()
         if connection.lost:  # woken by the loss, not acknowledged
             raise MqttDisconnectedError(f"publish to {topic[:200]}: connection lost")
+        if first is not None:
+            raise first
         waited = time.monotonic() - sent
         if waited > BACKLOG_SAID_AFTER and not connection.backlog_said:
             connection.backlog_said = True
@@ -287,24 +318,6 @@ class MqttClient:
                 waited,
                 connection.unacknowledged,
             )
-
-    async def publish_many(self, messages: Iterable[tuple[str, str | bytes, bool]]) -> None:
-        """Publish (topic, payload, retain) messages all at once and wait for every
-        acknowledgement together: a burst (the whole state after a reconnect) costs one
-        round trip, not one per message. All of them are handed to the connection before
-        anything else may publish: sent in parts, a later part could overtake a newer
-        message on the same topic (an ``offline`` sent meanwhile, then the burst's
-        ``online``)."""
-        # gather, not a TaskGroup: on Python 3.11 a TaskGroup whose task fails while it
-        # waits leaves its parent task marked as cancelling for good (fixed in 3.12), and
-        # the reconnect loop must go on after a lost connection
-        results = await asyncio.gather(
-            *(self.publish(topic, payload, retain=retain) for topic, payload, retain in messages),
-            return_exceptions=True,
-        )
-        for result in results:
-            if isinstance(result, BaseException):
-                raise result
 
     async def subscribe(self, *filters: str, qos: int = 1, live_only: bool = False) -> None:
         """Subscribe to every filter in one SUBSCRIBE; MqttRefusedError if one is refused.

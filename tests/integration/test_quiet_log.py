@@ -22,7 +22,7 @@ from tests.integration.mosquitto import Broker
 from tests.integration.proxy import relayed
 from tests.integration.test_one_bridge import started
 
-DEVICES = 24  # units of the five seed models on one simulated gateway
+DEVICES = 50  # units of the five seed models (ten of each) on one simulated gateway
 SEEDS = ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100")
 
 
