@@ -24,6 +24,7 @@ Not the published document (bridge/core/state.py): this is what it is built from
 from __future__ import annotations
 
 from collections.abc import Iterable
+from datetime import datetime
 
 from bridge.core.codec import Value, decode
 from bridge.core.counters import Kind, Reading, counters_of
@@ -178,7 +179,7 @@ class DeviceState:
         resets = document.get("last_reset")  # a total counter's, kept as it was
         if isinstance(resets, dict):
             for key, when in resets.items():
-                if key in self.counters and isinstance(when, str) and len(when) <= 40:
+                if key in self.counters and _is_time(when):
                     self.last_reset.setdefault(key, when)
         return frozenset(changed)
 
@@ -233,3 +234,13 @@ def _counted(point: Point, read: Value, reading: Reading) -> Value:
     if isinstance(read, int) and float(reading.value).is_integer():
         return int(reading.value)
     return round(reading.value, point.entity.decimals)
+
+
+def _is_time(text: object) -> bool:
+    """An ISO 8601 time with its offset (what a last_reset is), short enough to be one."""
+    if not isinstance(text, str) or len(text) > 40:
+        return False
+    try:
+        return datetime.fromisoformat(text).tzinfo is not None
+    except ValueError:
+        return False

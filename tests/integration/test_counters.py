@@ -93,8 +93,11 @@ def published(observer: Observer, device: str, key: str) -> list[Any]:
     """Every value of ``key`` the device's documents carried, in order, repeats dropped."""
     values: list[Any] = []
     for message in observer.log:
-        if message.topic == f"modbus/{device}" and message.payload:
-            value = json.loads(message.payload).get(key)
+        if message.topic != f"modbus/{device}" or not message.payload:
+            continue
+        document = json.loads(message.payload)
+        if isinstance(document, dict):  # not what a hostile client left retained
+            value = document.get(key)
             if not values or values[-1] != value:
                 values.append(value)
     return values
@@ -275,3 +278,35 @@ async def test_a_broker_restart_publishes_no_lower_count(mosquitto: Broker) -> N
             await polls(4)
             for device, _, key in COUNTERS:
                 assert set(published(observer, device, key)) == {counted[key]}, key
+
+
+@pytest.mark.asyncio
+async def test_hostile_retained_documents_change_nothing_and_end_nothing(mosquitto: Broker) -> None:
+    """Anyone may leave a retained message on a device topic: a number too large for a
+    float, NaN, a last_reset that is no time, alarms that are no names, a document that is
+    no object. The bridge comes online, counts on from what it reads, publishes no
+    nonsense."""
+    sim = counters_sim()
+    async with observing(mosquitto, "modbus/#") as observer:
+        hostile = {
+            "modbus/genset": json.dumps(
+                {
+                    "energy": 10**400,
+                    "run_hours": float("nan"),
+                    "alarms": [1, None, {"x": 1}, "a" * 1000],
+                }
+            ),
+            "modbus/starter": json.dumps(
+                {"current_run_time": 1e308 * 10, "last_reset": {"current_run_time": "soon"}}
+            ).replace("Infinity", "1e999"),
+            "modbus/pump": "[1, 2, 3]",
+        }
+        for topic, payload in hostile.items():
+            await observer.client.publish(topic, payload, retain=True)
+        async with bridged(mosquitto, sim) as bridge:
+            await eventually(lambda: bridge.mqtt_state == "online", timeout=10)
+            await settled(observer, sim)
+            starter = observer.json("modbus/starter")
+            assert starter["current_run_time"] == sim.value(STARTER, "current_run_time")
+            assert starter["last_reset"] == {"current_run_time": NEVER_RESET}
+            assert not [m for m in observer.log if m.topic.endswith("/event")]

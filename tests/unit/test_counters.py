@@ -215,3 +215,11 @@ def test_a_total_counter_carries_its_last_reset_in_the_document() -> None:
     assert state_document(mapping, points, values, later)["last_reset"] == later
     genset = load_mapping(builtin_mapping_path("smartgen_hgm6100"))
     assert "last_reset" not in state_document(genset, genset.points({}), {})
+
+
+@pytest.mark.parametrize("seed", [10**400, float("inf"), float("nan"), True, "19930", None])
+def test_a_seed_that_is_no_number_a_float_holds_is_ignored(seed: object) -> None:
+    counter = Counter(CounterRule(wrap=65536.0))
+    assert not counter.seed(seed)  # type: ignore[arg-type]
+    assert counter.read(10**400).kind is Kind.HELD  # and a reading neither ends anything
+    assert counter.read(5).value == 5

@@ -225,3 +225,11 @@ def test_a_reload_carries_the_counters_published() -> None:
     assert device.last_reset == {"hours": "2026-11-27T10:00:00+00:00"}
     counted(device, 0, 1001)  # a misread right after the reload is held like any other
     assert device.values == {"energy": 19930, "hours": 100.1}
+
+
+def test_a_seeded_last_reset_must_be_a_time() -> None:
+    device = DeviceState(COUNTING, {}, timing=LinkTiming(), recheck=RECHECK)
+    device.seed_counters({"last_reset": {"energy": "soon", "hours": "2026-11-27T10:00:00"}})
+    assert device.last_reset == {}  # no time, and a time without its offset
+    device.seed_counters({"last_reset": {"hours": "2026-11-27T10:00:00+00:00"}})
+    assert device.last_reset == {"hours": "2026-11-27T10:00:00+00:00"}
