@@ -76,7 +76,8 @@ def _keys(mapping: MappingParts) -> Iterator[str]:
         if not KEY_PATTERN.match(key):
             yield f"entities.{key}: keys are snake_case (a-z, 0-9, _), starting with a letter"
         elif key in RESERVED_KEYS and key != mapping.status:
-            yield f"entities.{key}: '{key}' is reserved in the state JSON (status, alarms)"
+            reserved = ", ".join(sorted(RESERVED_KEYS))
+            yield f"entities.{key}: '{key}' is reserved in the state JSON and topics ({reserved})"
 
 
 def _addresses(mapping: MappingParts) -> Iterator[str]:

@@ -768,3 +768,9 @@ def test_unlock_addresses_must_be_addresses() -> None:
     unlock = {"address": 0x1F00, "lock": "P99.999"}
     rows = errors_of(entity, protocol={"unlock": unlock})
     assert any(r.startswith("protocol.unlock.lock: ") for r in rows), rows
+
+
+@pytest.mark.parametrize("key", ["event", "last_reset"])
+def test_the_keys_the_events_and_counters_use_are_reserved(key: str) -> None:
+    rows = errors_of({key: {"name": "V", "address": 1}})
+    assert any(r.startswith(f"entities.{key}: '{key}' is reserved") for r in rows), rows
