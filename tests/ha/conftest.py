@@ -27,14 +27,16 @@ def ha_broker(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Broker]:
 
 
 @pytest.fixture(scope="module")
-def hass(ha_broker: Broker) -> Iterator[HomeAssistant]:
+def hass(request: pytest.FixtureRequest, ha_broker: Broker) -> Iterator[HomeAssistant]:
+    """One Home Assistant per test module, with the integrations the module names in
+    ``HA_INTEGRATIONS`` (the recorder for the statistics) besides MQTT."""
     version = os.environ.get("HA_VERSION", "")
     root = Path(os.environ.get("HA_ROOT", HA_CACHE))
     if not version or not (root / f"opt/ha-{version}/.ready").exists():
         pytest.skip("no Home Assistant installed: `make test-ha` installs and runs them")
     if shutil.which("chroot") is None or os.geteuid() != 0:
         pytest.skip("Home Assistant runs in a chroot: needs root")
-    ha = HomeAssistant(root, version)
+    ha = HomeAssistant(root, version, integrations=getattr(request.module, "HA_INTEGRATIONS", ()))
     try:
         ha.start()
         ha.add_mqtt(ha_broker.host, ha_broker.port)

@@ -27,10 +27,8 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
-import shutil
 import time
-from collections.abc import Awaitable, Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -70,27 +68,7 @@ CONTROL_UNIQUE_ID = "counter_statistics_raw_energy"
 CONTROL_TOPIC = "counter_statistics/raw_energy"
 
 
-@pytest.fixture(scope="module")
-def hass(ha_broker: Broker) -> Iterator[HomeAssistant]:
-    """conftest.py's Home Assistant with the recorder loaded (the other modules' runs
-    need none)."""
-    version = os.environ.get("HA_VERSION", "")
-    root = Path(os.environ.get("HA_ROOT", HA_CACHE))
-    if not version or not (root / f"opt/ha-{version}/.ready").exists():
-        pytest.skip("no Home Assistant installed: `make test-ha` installs and runs them")
-    if shutil.which("chroot") is None or os.geteuid() != 0:
-        pytest.skip("Home Assistant runs in a chroot: needs root")
-    ha = HomeAssistant(root, version, integrations=("recorder",))
-    try:
-        ha.start()
-        ha.add_mqtt(ha_broker.host, ha_broker.port)
-        yield ha
-    finally:
-        ha.stop()
-        if os.environ.get("HA_KEEP_CONFIG"):
-            print(f"Home Assistant's config folder: {ha.workdir}")
-        else:
-            ha.remove()
+HA_INTEGRATIONS = ("recorder",)  # conftest.py's hass loads it for this module only
 
 
 def produced(story: Sequence[int | str], start: float) -> float:
