@@ -30,7 +30,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from bridge.config import MqttConfig
-from bridge.core.alarm_events import alarm_events, event_document
+from bridge.core.alarm_events import alarm_events, event_document, reported
 from bridge.core.discovery import Publish
 from bridge.core.discovery_alarms import alarm_names
 from bridge.core.state import compact, plain_payload, published, state_document
@@ -46,7 +46,7 @@ OUTBOX = 200  # non-retained messages kept while the broker is away
 HA_SETTLE = 0.5  # seconds after Home Assistant's "online" before republishing
 HA_REPUBLISH_GAP = 30.0  # seconds at least between two republishes Home Assistant asks for
 STATE_AFTER_DISCOVERY = 1.0  # seconds: a device's state again after its discovery changed
-MAX_SEEDED_ALARMS = 1000  # alarm names taken from a retained document, at most
+MAX_SEEDED_ALARMS = 200  # alarm names read from a retained document, at most
 
 
 class StatePublisher:
@@ -93,10 +93,11 @@ class StatePublisher:
         """The alarms a retained document said active, for a device this run has said
         nothing of yet: an alarm already active before a restart does not fire again."""
         alarms = document.get("alarms")
-        if device_id in self._alarms or not isinstance(alarms, list):
+        poller = self.engine.devices.get(device_id)
+        if device_id in self._alarms or not isinstance(alarms, list) or poller is None:
             return
         names = [a for a in alarms[:MAX_SEEDED_ALARMS] if isinstance(a, str) and len(a) <= 200]
-        self._alarms[device_id] = frozenset(names)
+        self._alarms[device_id] = reported(names, poller.points)
 
     def carried_over(self) -> None:
         """What a run before left retained is read (or there was none): from now on alarm

@@ -15,6 +15,7 @@ event entity and device triggers, Node-RED and plain clients read.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass
 
@@ -70,6 +71,12 @@ def alarm_events(
     events = [_event(n, False, owners[n], points) for n in cleared]
     events += [_event(n, True, owners[n], points) for n in raised]
     return events, frozenset((before - set(cleared)) | active)
+
+
+def reported(names: Iterable[str], points: AnyMapping[str, Point]) -> frozenset[str]:
+    """The ``names`` some alarm entity of ``points`` can report (what a retained document
+    says was active is taken only for those: anything else would be kept for nothing)."""
+    return frozenset(name for name in names if _owner(name, points) is not None)
 
 
 def _owner(name: str, points: AnyMapping[str, Point]) -> str | None:

@@ -293,7 +293,7 @@ async def test_hostile_retained_documents_change_nothing_and_end_nothing(mosquit
                 {
                     "energy": 10**400,
                     "run_hours": float("nan"),
-                    "alarms": [1, None, {"x": 1}, "a" * 1000],
+                    "alarms": [1, None, {"x": 1}, "a" * 1000, *(f"n{i}" for i in range(5000))],
                 }
             ),
             "modbus/starter": json.dumps(

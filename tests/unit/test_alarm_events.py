@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from bridge.core.alarm_events import AlarmEvent, alarm_events, event_document
+from bridge.core.alarm_events import AlarmEvent, alarm_events, event_document, reported
 from bridge.core.discovery import build_device_discovery
 from bridge.core.discovery_alarms import alarm_names
 from bridge.core.mapping import builtin_mapping_names, builtin_mapping_path, load_mapping
@@ -112,3 +112,8 @@ def test_every_alarm_of_every_shipped_mapping_has_its_triggers_and_event_types(
             assert (trigger["type"], trigger["subtype"]) == (state, shown)
             assert trigger["topic"] == events["state_topic"] == "modbus/dev/event"
     assert set(triggers) <= set(events["event_types"])
+
+
+def test_only_names_an_entity_reports_are_taken_from_a_document() -> None:
+    names = ["dry_running", "overload", "fault_23", "fault_x", "speed", "nothing", "x" * 200]
+    assert reported(names, POINTS) == {"dry_running", "overload", "fault_23"}
