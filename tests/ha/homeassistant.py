@@ -130,6 +130,7 @@ class HomeAssistant:
     root: Path  # the chroot
     version: str
     integrations: tuple[str, ...] = ()  # loaded besides the harness's own, with no options
+    extra_yaml: str = ""  # appended to configuration.yaml as is (a `modbus:` block, say)
     port: int = 0
     workdir: Path | None = None
     process: subprocess.Popen[bytes] | None = None
@@ -158,13 +159,28 @@ class HomeAssistant:
         tmp.mkdir(exist_ok=True)
         self.workdir = Path(tempfile.mkdtemp(prefix="ha-", dir=tmp))
         self.port = free_port()
+        self.write_configuration()
+        self._launch()
+        self._onboard()
+
+    def write_configuration(self) -> None:
+        """configuration.yaml from the harness's own, ``integrations`` and ``extra_yaml``
+        (change ``extra_yaml`` and call this, then ``restart``, to change the config)."""
         extra = "".join(f"{name}:\n" for name in self.integrations)
-        (self.workdir / "configuration.yaml").write_text(
-            CONFIGURATION.format(port=self.port) + extra
+        (self.config_dir / "configuration.yaml").write_text(
+            CONFIGURATION.format(port=self.port) + extra + self.extra_yaml
         )
-        inside = "/" + str(self.workdir.relative_to(self.root))
+
+    def restart(self) -> None:
+        """Stop and start again on the same config folder (entities, registries, recorder
+        and the access token kept)."""
+        self.stop()
+        self._launch()
+
+    def _launch(self) -> None:
+        inside = "/" + str(self.config_dir.relative_to(self.root))
         hass = f"/opt/ha-{self.version}/bin/hass"
-        with (self.workdir / "stdout.log").open("wb") as output:
+        with (self.config_dir / "stdout.log").open("ab") as output:
             self.process = subprocess.Popen(
                 ["chroot", str(self.root), *CLEAN_ENV, hass, "-c", inside],
                 stdout=output,
@@ -172,7 +188,6 @@ class HomeAssistant:
                 start_new_session=True,
             )
         self._wait_until_up()
-        self._onboard()
 
     def _wait_until_up(self) -> None:
         deadline = time.monotonic() + START_TIMEOUT
