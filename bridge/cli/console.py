@@ -72,6 +72,7 @@ _LAZY = {  # command: (module, the function that adds its parser)
     "read": ("bridge.cli.commission", "add_parsers"),
     "write": ("bridge.cli.commission", "add_parsers"),
     "demo": ("bridge.cli.demo", "add_parser"),
+    "import": ("bridge.cli.importer", "add_parser"),
 }
 
 

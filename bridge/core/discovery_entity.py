@@ -133,8 +133,15 @@ def read_only_platform(entity: Entity) -> Component:
     return Component.BINARY_SENSOR if entity.kind == "bool" else Component.SENSOR
 
 
-def base_config(key: str, name: str, platform: Component, context: ComponentContext) -> Config:
-    """The options every component has: platform, ids, name and QoS.
+def base_config(
+    key: str,
+    name: str,
+    platform: Component,
+    context: ComponentContext,
+    entity_id: str | None = None,
+) -> Config:
+    """The options every component has: platform, ids, name and QoS. ``entity_id``: the
+    object id the entity asks for instead of ``object_id``'s (an imported entity's).
 
     QoS is set per component: Home Assistant up to 2026.2 at least accepts a shared
     ``qos`` at the root of a device payload but does not pass it on to the components.
@@ -142,7 +149,7 @@ def base_config(key: str, name: str, platform: Component, context: ComponentCont
     return {
         "platform": platform.value,
         "unique_id": f"{context.unique_prefix}_{key}",
-        "default_entity_id": f"{platform.value}.{object_id(key, context)}",
+        "default_entity_id": f"{platform.value}.{entity_id or object_id(key, context)}",
         "name": shown_name(name, context.device_name),
         "qos": QOS,
     }
@@ -153,7 +160,7 @@ def component_config(key: str, entity: Entity, context: ComponentContext) -> Con
     platform = platform_of(entity, context.allow_dangerous_writes)
     if platform is None:
         return None
-    config = base_config(key, entity.name, platform, context)
+    config = base_config(key, entity.name, platform, context, entity.ha.entity_id)
     category = entity.ha.entity_category
     if category == "config" and platform in _READ_ONLY:
         category = "diagnostic"  # Home Assistant refuses config on sensors

@@ -118,6 +118,13 @@ class Presentation(BaseModel):
     )
     display_precision: int | None = Field(None, ge=0, le=6)
     mode: str | None = Field(None, pattern="^(auto|box|slider)$", description="number mode")
+    entity_id: str | None = Field(
+        None,
+        pattern=r"^[a-z0-9_]+$",
+        max_length=200,
+        description="the entity id asked of Home Assistant, after the platform (default "
+        "<device>_<key>): an imported entity keeps the id Home Assistant's modbus gave it",
+    )
 
 
 class Simulation(BaseModel):

@@ -1,0 +1,287 @@
+"""Home Assistant's ``modbus:`` YAML as a bridge config and one mapping per device.
+
+``import_ha(data, source)`` takes what ``source.load_source`` read: a whole
+``configuration.yaml`` (its ``modbus:`` key, and the ``modbus:`` of each package under
+``homeassistant: packages:``), a package file, a bare list of hubs or one hub. Each hub
+becomes a bus, each (hub, unit) a device with its own mapping; sensors, binary sensors and
+switches are converted (``ha_entity``), fans and lights as switches (their entity ids
+change platform), climates and covers are noted. ``scan_interval`` picks the device's
+``fast`` (the shortest) and ``slow`` (the longest) poll, ``0`` reads once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from pydantic import ValidationError
+
+from bridge.core.entity import Entity
+from bridge.core.mapping import Mapping, format_validation_errors
+from bridge.importer import ha_entity
+from bridge.importer.ha_entity import Draft
+from bridge.importer.naming import identifier, unique_key
+from bridge.importer.result import MAX_ENTITIES, Import, ImportedDevice
+from bridge.importer.source import Node, Unresolved, Where
+
+_CONVERTERS: dict[str, Callable[[Node, Import], list[Draft]]] = {
+    "sensors": ha_entity.sensor,
+    "binary_sensors": ha_entity.binary_sensor,
+    "switches": ha_entity.switch,
+    "fans": lambda node, result: ha_entity.switch(node, result, "fan"),
+    "lights": lambda node, result: ha_entity.switch(node, result, "light"),
+}
+_NOT_CONVERTED = {
+    "climates": "a climate (target and current temperature, HVAC modes) has no mapping "
+    "form; map its registers as a sensor and a number by hand",
+    "covers": "a cover (open/close states and commands) has no mapping form; map its "
+    "register as a select by hand",
+}
+_HUB_KEYS = frozenset(
+    {"name", "type", "host", "port", "timeout", "delay", "message_wait_milliseconds"}
+    | {"method", "baudrate", "bytesize", "parity", "stopbits"}
+)
+_TRANSPORTS = {"tcp": "tcp", "rtuovertcp": "rtu-over-tcp"}
+DEFAULT_HUB = "modbus_hub"
+
+
+def import_ha(data: Any, source: str) -> Import:
+    """Convert every hub found in ``data``; the answer's notes list what was left out."""
+    result = Import(source)
+    hubs = find_hubs(data, result)
+    if not hubs:
+        where = data.where if isinstance(data, Node) else Where(source, 1)
+        result.note(where, "modbus", "no modbus hub found")
+    for hub in hubs:
+        convert_hub(hub, result)
+    return result
+
+
+def find_hubs(data: Any, result: Import) -> list[Node]:
+    """The hubs of a configuration, a package file, a list of hubs or one hub."""
+    if isinstance(data, list):
+        blocks: list[Any] = [data]
+    elif isinstance(data, Node) and "type" in data:
+        blocks = [data]
+    elif isinstance(data, Node):
+        blocks = [data["modbus"]] if "modbus" in data else []
+        core = data.get("homeassistant")
+        packages = core.get("packages") if isinstance(core, Node) else None
+        if isinstance(packages, Node):
+            blocks += [
+                p["modbus"] for p in packages.values() if isinstance(p, Node) and "modbus" in p
+            ]
+        for value in (core, packages):
+            if isinstance(value, Unresolved):
+                result.note(value.where, value.tag, value.reason)
+    else:
+        blocks = []
+    hubs: list[Node] = []
+    for block in blocks:
+        for hub in block if isinstance(block, list) else [block]:
+            if isinstance(hub, Node):
+                hubs.append(hub)
+            elif isinstance(hub, Unresolved):
+                result.note(hub.where, f"{hub.tag} {hub.value}", hub.reason)
+    return hubs
+
+
+def convert_hub(hub: Node, result: Import) -> None:
+    """One hub: its bus, and a device per unit its entities address."""
+    name = str(hub.get("name", DEFAULT_HUB))
+    bus = _bus(hub, name, result)
+    for key in hub:
+        if key not in _HUB_KEYS | set(_CONVERTERS) | set(_NOT_CONVERTED):
+            result.note(hub.at(key), f"{name}.{key}", "a key the import does not know")
+    units: dict[int, list[Draft]] = {}
+    for kind in (*_CONVERTERS, *_NOT_CONVERTED):
+        for node in _items(hub, kind, name, result):
+            if bus is None:
+                result.note(node.where, f"{name}.{kind}", "its hub is not converted")
+            elif kind in _NOT_CONVERTED:
+                result.note(node.where, f"{node.get('name', kind)}", _NOT_CONVERTED[kind])
+            elif result.entities >= MAX_ENTITIES:
+                result.note(node.where, kind, f"more than {MAX_ENTITIES} entities: not converted")
+            else:
+                if kind in ("fans", "lights"):
+                    result.note(
+                        node.where,
+                        str(node.get("name", kind)),
+                        f"a {kind[:-1]} becomes a switch (switch.<id>, not {kind[:-1]}.<id>)",
+                        partly=True,
+                    )
+                drafts = _CONVERTERS[kind](node, result)
+                result.entities += len(drafts)
+                unit = node.get("slave", node.get("device_address", 0))
+                units.setdefault(unit if isinstance(unit, int) else 0, []).extend(drafts)
+    if bus is None:
+        return
+    result.buses.append(bus)
+    for unit, drafts in sorted(units.items()):
+        _device(hub, bus, unit, drafts, result, single=len(units) == 1)
+
+
+def _items(hub: Node, kind: str, name: str, result: Import) -> list[Node]:
+    value = hub.get(kind)
+    if value is None:
+        return []
+    if isinstance(value, Unresolved):
+        result.note(value.where, f"{name}.{kind}", f"{value.tag} {value.value}: {value.reason}")
+        return []
+    items = value if isinstance(value, list) else [value]
+    nodes = []
+    for item in items:
+        if isinstance(item, Node):
+            nodes.append(item)
+        else:
+            where = item.where if isinstance(item, Unresolved) else hub.at(kind)
+            result.note(where, f"{name}.{kind}", "not an entity (key: value)")
+    return nodes
+
+
+def _bus(hub: Node, name: str, result: Import) -> dict[str, Any] | None:
+    """The bus of a hub, or None (noted) when the bridge cannot speak it."""
+    kind = hub.get("type")
+    bus: dict[str, Any] = {"id": identifier(name)}
+    timeout = hub.get("timeout", 3)
+    if isinstance(timeout, int | float) and not isinstance(timeout, bool) and 0 < timeout <= 60:
+        bus["timeout"] = timeout
+    elif "timeout" in hub:
+        result.note(hub.at("timeout"), f"{name}.timeout", "not 0..60 s: 1 s")
+    if kind in _TRANSPORTS:
+        host, port = hub.get("host"), hub.get("port", 502)
+        if not isinstance(host, str) or not isinstance(port, int):
+            result.note(hub.at("host"), f"{name}.host", "needs a host and a port")
+            return None
+        bus |= {"transport": _TRANSPORTS[kind], "host": host, "tcp_port": port}
+    elif kind == "serial":
+        serial = _serial(hub, name, result)
+        if serial is None:
+            return None
+        bus |= serial
+    else:
+        reason = "the bridge has no UDP transport" if kind == "udp" else f"type {kind!r}"
+        result.note(hub.at("type"), f"{name}.type", f"{reason}: the hub is not converted")
+        return None
+    if hub.get("delay"):
+        result.note(
+            hub.at("delay"),
+            f"{name}.delay",
+            "the bridge does not wait after connecting",
+        )
+    return bus
+
+
+def _serial(hub: Node, name: str, result: Import) -> dict[str, Any] | None:
+    port, method = hub.get("port"), hub.get("method", "rtu")
+    size = hub.get("bytesize", 8)
+    line = {k: hub.get(k) for k in ("baudrate", "parity", "stopbits")}
+    if not isinstance(port, str) or method not in ("rtu", "ascii") or size not in (7, 8):
+        result.note(
+            hub.at("bytesize" if size not in (7, 8) else "port"),
+            f"{name}.type",
+            "a serial line needs a port, method rtu/ascii and 7 or 8 data bits: not converted",
+        )
+        return None
+    serial: dict[str, Any] = {"transport": method, "port": port, "bytesize": size}
+    return serial | {k: v for k, v in line.items() if v is not None}
+
+
+def _device(
+    hub: Node, bus: dict[str, Any], unit: int, drafts: list[Draft], result: Import, *, single: bool
+) -> None:
+    """One device and its mapping from the drafts of one unit (``single``: the hub's only
+    unit, the device takes the hub's id and name)."""
+    name = str(hub.get("name", DEFAULT_HUB))
+    device_id = bus["id"] if single else f"{bus['id']}_unit_{unit}"
+    fast, slow = _poll(drafts)
+    entities: dict[str, Any] = {}
+    for draft in drafts:
+        fields = _entity(draft, fast, slow, result)
+        if fields is not None:
+            entities[unique_key(draft.name, entities)] = fields
+    entities = _whole(entities, drafts, result)
+    config: dict[str, Any] = {
+        "id": device_id,
+        "name": name if single else f"{name} unit {unit}",
+        "bus": bus["id"],
+        "unit": unit or 1,
+        "poll": {"fast": fast or 15, "slow": max(slow, fast or 15)},
+    }
+    if unit == 0:
+        config["enabled"] = False
+        result.note(
+            hub.where,
+            f"{name} unit 0",
+            "Home Assistant's default unit 0 (broadcast on a serial line) cannot be "
+            "addressed: written as unit 1 and disabled; set the device's unit and enable it",
+            partly=True,
+        )
+    wait = hub.get("message_wait_milliseconds")
+    if isinstance(wait, int) and not isinstance(wait, bool) and wait > 0:
+        config["protocol"] = {"min_request_interval": wait / 1000}
+    mapping = {
+        "manufacturer": "Imported",
+        "model": config["name"],
+        "description": f"Home Assistant modbus hub {name!r}, unit {unit}, imported",
+        "source": {"title": f"Home Assistant modbus configuration {result.source}"},
+        "protocol": {"transports": [bus["transport"]]},
+        "entities": entities,
+    }
+    result.devices.append(ImportedDevice(config, mapping))
+
+
+def _poll(drafts: list[Draft]) -> tuple[int, int]:
+    """The device's fast and slow poll: the shortest and the longest scan interval."""
+    intervals = sorted({d.scan_interval for d in drafts if d.scan_interval > 0})
+    if not intervals:
+        return 0, 0
+    return intervals[0], intervals[-1]
+
+
+def _entity(draft: Draft, fast: int, slow: int, result: Import) -> dict[str, Any] | None:
+    """The entity's fields, validated; a device class Home Assistant's modbus took but the
+    mapping refuses is dropped (noted); None (noted) when it still does not validate."""
+    interval = draft.scan_interval
+    nearer_fast = interval * interval <= fast * slow  # nearer on a log scale
+    poll = "once" if interval == 0 else "fast" if nearer_fast else "slow"
+    if interval not in (0, fast, slow):
+        result.note(
+            draft.node.at("scan_interval"),
+            f"{draft.name}.scan_interval",
+            f"{interval} s: read with the device's {poll} poll ({fast if nearer_fast else slow} s)",
+            partly=True,
+        )
+    fields = draft.fields | {"poll": poll, "ha": draft.ha}
+    for drop in ((), ("state_class",), ("state_class", "device_class")):
+        trial = fields | {"ha": {k: v for k, v in draft.ha.items() if k not in drop}}
+        try:
+            Entity.model_validate(trial)
+        except ValidationError as exc:
+            error = "; ".join(format_validation_errors(exc))
+            continue
+        for key in drop:
+            result.note(draft.node.at(key), f"{draft.name}.{key}", f"refused: {error}")
+        return trial
+    result.note(draft.node.where, draft.name, f"not converted: {error}")
+    return None
+
+
+def _whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict[str, Any]:
+    """The entities that pass the checks across entities (overlaps...); the rest noted."""
+    where = {d.name: d.node.where for d in drafts}
+    for _ in range(len(entities) + 1):
+        if not entities:
+            return entities
+        document = {"manufacturer": "x", "model": "x", "description": "x"}
+        try:
+            Mapping.model_validate(document | {"source": {"title": "x"}, "entities": entities})
+        except ValidationError as exc:
+            rows = list(format_validation_errors(exc))
+        else:
+            return entities
+        named = [k for k in entities if any(f"entities.{k}" in r or f"'{k}'" in r for r in rows)]
+        for key in named or list(entities):
+            name = entities.pop(key)["name"]
+            result.note(where.get(name, Where(result.source, 1)), name, "; ".join(rows))
+    return entities

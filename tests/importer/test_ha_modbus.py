@@ -1,0 +1,253 @@
+"""Home Assistant's modbus YAML imported: values decode as Home Assistant shows them, every
+key not converted is reported with file and line, and the written files pass `check`."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from bridge.core.codec import decode
+from bridge.core.entity import Table
+from bridge.core.mapping import Mapping
+from bridge.importer.ha_modbus import import_ha
+from bridge.importer.result import Import
+from bridge.importer.source import load_source
+
+DATA = Path(__file__).parent / "data"
+CASES = yaml.safe_load((DATA / "ha_sensor_values.yaml").read_text())["cases"]
+
+
+def convert(tmp_path: Path, text: str, name: str = "configuration.yaml") -> Import:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return import_ha(load_source(path), name)
+
+
+def hub_with(sensor: dict[str, Any]) -> str:
+    hub = {"name": "hub", "type": "tcp", "host": "127.0.0.1", "port": 502}
+    return yaml.safe_dump({"modbus": [hub | {"sensors": [sensor]}]})
+
+
+def only_mapping(result: Import) -> Mapping:
+    (device,) = result.devices
+    return Mapping.model_validate(device.mapping)
+
+
+@pytest.mark.parametrize("case", CASES, ids=[str(c["addon"]) for c in CASES])
+def test_home_assistant_sensor_cases_decode_to_the_same_state(
+    tmp_path: Path, case: dict[str, Any]
+) -> None:
+    sensor = {"name": "Test", "address": 51, "slave": 1, "scan_interval": 1} | case["addon"]
+    result = convert(tmp_path, hub_with(sensor))
+    noted = {note.key.split(".")[-1]: note for note in result.notes}
+    if "not_converted" in case:
+        assert not result.usable
+        assert noted[case["not_converted"]].where.line == 7  # the data_type line
+        return
+    point = only_mapping(result).points()["test"]
+    table = Table(point.table)
+    image = {(table, 51 + i): word for i, word in enumerate(case["words"])}
+    value = decode(point, image)
+    shown = case.get("bridge", case["expected"])
+    if "partly" in case:
+        assert case["partly"] in noted
+    if shown is None or isinstance(value, str):
+        assert value == shown
+    else:
+        decimals = case["addon"].get("precision", 0)
+        assert math.isclose(float(value), float(shown), abs_tol=0.5 * 10**-decimals)  # type: ignore[arg-type]
+
+
+def test_a_whole_configuration_becomes_buses_devices_and_mappings(tmp_path: Path) -> None:
+    text = """\
+homeassistant:
+  name: Home
+modbus:
+  - name: Solar inverter
+    type: rtuovertcp
+    host: 192.0.2.7
+    port: 8899
+    timeout: 5
+    message_wait_milliseconds: 40
+    sensors:
+      - {name: PV power, address: 10, slave: 3, data_type: uint32, swap: word, scale: 0.1,
+         unit_of_measurement: W, device_class: power, state_class: measurement,
+         unique_id: pv_power, scan_interval: 10}
+      - {name: Grid voltage, address: 20, slave: 3, input_type: input, virtual_count: 2,
+         scale: 0.1, precision: 1, unit_of_measurement: V, device_class: voltage,
+         scan_interval: 60}
+    binary_sensors:
+      - {name: Fault, address: 4, slave: 3, input_type: discrete_input, device_class: problem}
+      - {name: Running, address: 30, slave: 3, input_type: holding}
+    switches:
+      - {name: Export limit, address: 200, slave: 3, verify: {}}
+      - {name: Relay, address: 7, slave: 4, write_type: coil}
+  - name: Heat pump
+    type: serial
+    method: rtu
+    port: /dev/ttyUSB0
+    baudrate: 19200
+    bytesize: 8
+    parity: E
+    stopbits: 1
+    sensors:
+      - {name: Flow temperature, address: 1, slave: 1, scale: 0.1,
+         unit_of_measurement: "°C", device_class: temperature}
+"""
+    result = convert(tmp_path, text)
+    assert result.buses == [
+        {
+            "id": "solar_inverter",
+            "timeout": 5,
+            "transport": "rtu-over-tcp",
+            "host": "192.0.2.7",
+            "tcp_port": 8899,
+        },
+        {
+            "id": "heat_pump",
+            "timeout": 3,
+            "transport": "rtu",
+            "port": "/dev/ttyUSB0",
+            "bytesize": 8,
+            "baudrate": 19200,
+            "parity": "E",
+            "stopbits": 1,
+        },
+    ]
+    devices = {d.id: d for d in result.devices}
+    assert sorted(devices) == ["heat_pump", "solar_inverter_unit_3", "solar_inverter_unit_4"]
+    inverter = devices["solar_inverter_unit_3"]
+    assert inverter.config == {
+        "id": "solar_inverter_unit_3",
+        "name": "Solar inverter unit 3",
+        "bus": "solar_inverter",
+        "unit": 3,
+        "poll": {"fast": 10, "slow": 60},
+        "protocol": {"min_request_interval": 0.04},
+    }
+    entities = inverter.mapping["entities"]
+    assert list(entities) == [
+        "pv_power",
+        "grid_voltage",
+        "grid_voltage_1",
+        "grid_voltage_2",
+        "fault",
+        "running",
+        "export_limit",
+    ]
+    assert entities["pv_power"] == {
+        "name": "PV power",
+        "address": 10,
+        "note": "Home Assistant modbus unique_id pv_power",
+        "table": "holding",
+        "type": "u32",
+        "word_order": "little",
+        "scale": 0.1,
+        "offset": 0.0,
+        "unit": "W",
+        "poll": "fast",
+        "ha": {"entity_id": "pv_power", "device_class": "power", "state_class": "measurement"},
+    }
+    assert entities["grid_voltage_2"]["address"] == 22
+    assert entities["grid_voltage_2"]["ha"]["entity_id"] == "grid_voltage_2"
+    assert entities["running"] | {} == {
+        "name": "Running",
+        "address": 30,
+        "table": "holding",
+        "bit": 0,
+        "poll": "fast",
+        "ha": {"entity_id": "running"},
+    }
+    assert entities["export_limit"] == {
+        "name": "Export limit",
+        "address": 200,
+        "table": "holding",
+        "type": "bool",
+        "write_function": 6,
+        "access": "rw",
+        "poll": "fast",
+        "ha": {"entity_id": "export_limit", "component": "switch"},
+    }
+    relay = devices["solar_inverter_unit_4"].mapping["entities"]["relay"]
+    assert (relay["table"], relay["access"], relay["write_function"]) == ("coil", "w", 5)
+    mapping = Mapping.model_validate(inverter.mapping)
+    assert mapping.points()["pv_power"].address == 10
+    # 15 s (the default) of the binary sensors is read with the fast poll (10 s)
+    assert [str(n) for n in result.notes] == [
+        "configuration.yaml:18: Fault.scan_interval: partly converted: 15 s: read with the "
+        "device's fast poll (10 s)",
+        "configuration.yaml:19: Running.scan_interval: partly converted: 15 s: read with the "
+        "device's fast poll (10 s)",
+        "configuration.yaml:21: Export limit.scan_interval: partly converted: 15 s: read with "
+        "the device's fast poll (10 s)",
+    ]
+
+
+def test_every_key_left_out_is_reported_with_its_line(tmp_path: Path) -> None:
+    text = """\
+modbus:
+  - name: hub
+    type: tcp
+    host: 127.0.0.1
+    port: 502
+    delay: 3
+    retries: 3
+    sensors:
+      - name: Energy
+        address: 1
+        slave: 1
+        data_type: float64
+      - name: Power
+        address: 5
+        slave: 1
+        zero_suppress: 2
+        min_value: 0
+        lazy_error_count: 3
+    switches:
+      - {name: Mode, address: 9, slave: 1, command_on: 0xFF, command_off: 0}
+    climates:
+      - {name: Room, address: 1, slave: 1, target_temp_register: 2}
+    covers:
+      - {name: Shutter, address: 3, slave: 1}
+  - name: far
+    type: udp
+    host: 192.0.2.1
+    port: 502
+    sensors:
+      - {name: Lost, address: 1, slave: 1}
+"""
+    result = convert(tmp_path, text)
+    assert [(n.where.line, n.key, n.partly) for n in result.notes] == [
+        (6, "hub.delay", False),
+        (7, "hub.retries", False),
+        (12, "Energy.data_type", False),
+        (18, "Power.lazy_error_count", False),
+        (17, "Power.min_value", False),
+        (16, "Power.zero_suppress", False),
+        (20, "Mode.command_on", False),
+        (22, "Room", False),
+        (24, "Shutter", False),
+        (26, "far.type", False),
+        (30, "far.sensors", False),
+    ]
+    assert list(result.devices[0].mapping["entities"]) == ["power"]
+
+
+def test_unit_0_is_written_disabled_and_reported(tmp_path: Path) -> None:
+    fixture = DATA / "ha_fixtures" / "configuration.yaml"
+    result = import_ha(load_source(fixture), fixture.name)
+    (device,) = result.devices
+    assert (device.config["unit"], device.config["enabled"]) == (1, False)
+    assert [n.key for n in result.notes] == ["testModbus unit 0"]
+
+
+def test_nothing_usable_is_not_usable(tmp_path: Path) -> None:
+    result = convert(tmp_path, "homeassistant:\n  name: Home\n")
+    assert not result.usable
+    assert [str(n) for n in result.notes] == [
+        "configuration.yaml:1: modbus: not converted: no modbus hub found"
+    ]
