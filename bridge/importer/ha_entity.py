@@ -12,9 +12,8 @@ its bit 0, a switch writes ``command_on``/``command_off`` and reads its state on
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
-from typing import Any
 
+from bridge.importer.draft import Draft
 from bridge.importer.naming import ha_slug
 from bridge.importer.result import Import
 from bridge.importer.source import Node
@@ -45,17 +44,6 @@ _READ_TABLES = {
     "coils": "coil",
     "discrete_input": "discrete",
 }
-
-
-@dataclass(slots=True)
-class Draft:
-    """A mapping entity being made, with the scan interval it was polled at."""
-
-    name: str
-    fields: dict[str, Any]
-    scan_interval: int
-    node: Node
-    ha: dict[str, Any] = field(default_factory=dict)
 
 
 def base_draft(node: Node, result: Import, kind: str) -> Draft | None:

@@ -14,12 +14,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from pydantic import ValidationError
-
-from bridge.core.entity import Entity
-from bridge.core.mapping import Mapping, format_validation_errors
 from bridge.importer import ha_entity
-from bridge.importer.ha_entity import Draft
+from bridge.importer.draft import Draft, mapping_document, validated, whole
 from bridge.importer.naming import identifier, unique_key
 from bridge.importer.result import MAX_ENTITIES, Import, ImportedDevice
 from bridge.importer.source import Node, Unresolved, Where
@@ -200,7 +196,11 @@ def _device(
         fields = _entity(draft, fast, slow, result)
         if fields is not None:
             entities[unique_key(draft.name, entities)] = fields
-    entities = _whole(entities, drafts, result)
+    entities = whole(entities, drafts, result)
+    if not entities:
+        reason = "no entity converted: the device is not written"
+        result.note(hub.where, f"{name} unit {unit}", reason)
+        return
     config: dict[str, Any] = {
         "id": device_id,
         "name": name if single else f"{name} unit {unit}",
@@ -220,14 +220,8 @@ def _device(
     wait = hub.get("message_wait_milliseconds")
     if isinstance(wait, int) and not isinstance(wait, bool) and wait > 0:
         config["protocol"] = {"min_request_interval": wait / 1000}
-    mapping = {
-        "manufacturer": "Imported",
-        "model": config["name"],
-        "description": f"Home Assistant modbus hub {name!r}, unit {unit}, imported",
-        "source": {"title": f"Home Assistant modbus configuration {result.source}"},
-        "protocol": {"transports": [bus["transport"]]},
-        "entities": entities,
-    }
+    description = f"Home Assistant modbus hub {name!r}, unit {unit}, imported"
+    mapping = mapping_document(config["name"], description, bus["transport"], entities, result)
     result.devices.append(ImportedDevice(config, mapping))
 
 
@@ -240,8 +234,7 @@ def _poll(drafts: list[Draft]) -> tuple[int, int]:
 
 
 def _entity(draft: Draft, fast: int, slow: int, result: Import) -> dict[str, Any] | None:
-    """The entity's fields, validated; a device class Home Assistant's modbus took but the
-    mapping refuses is dropped (noted); None (noted) when it still does not validate."""
+    """The entity's fields with its poll class, validated (``draft.validated``)."""
     interval = draft.scan_interval
     nearer_fast = interval * interval <= fast * slow  # nearer on a log scale
     poll = "once" if interval == 0 else "fast" if nearer_fast else "slow"
@@ -252,36 +245,4 @@ def _entity(draft: Draft, fast: int, slow: int, result: Import) -> dict[str, Any
             f"{interval} s: read with the device's {poll} poll ({fast if nearer_fast else slow} s)",
             partly=True,
         )
-    fields = draft.fields | {"poll": poll, "ha": draft.ha}
-    for drop in ((), ("state_class",), ("state_class", "device_class")):
-        trial = fields | {"ha": {k: v for k, v in draft.ha.items() if k not in drop}}
-        try:
-            Entity.model_validate(trial)
-        except ValidationError as exc:
-            error = "; ".join(format_validation_errors(exc))
-            continue
-        for key in drop:
-            result.note(draft.node.at(key), f"{draft.name}.{key}", f"refused: {error}")
-        return trial
-    result.note(draft.node.where, draft.name, f"not converted: {error}")
-    return None
-
-
-def _whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict[str, Any]:
-    """The entities that pass the checks across entities (overlaps...); the rest noted."""
-    where = {d.name: d.node.where for d in drafts}
-    for _ in range(len(entities) + 1):
-        if not entities:
-            return entities
-        document = {"manufacturer": "x", "model": "x", "description": "x"}
-        try:
-            Mapping.model_validate(document | {"source": {"title": "x"}, "entities": entities})
-        except ValidationError as exc:
-            rows = list(format_validation_errors(exc))
-        else:
-            return entities
-        named = [k for k in entities if any(f"entities.{k}" in r or f"'{k}'" in r for r in rows)]
-        for key in named or list(entities):
-            name = entities.pop(key)["name"]
-            result.note(where.get(name, Where(result.source, 1)), name, "; ".join(rows))
-    return entities
+    return validated(draft, draft.fields | {"poll": poll, "ha": draft.ha}, result)
