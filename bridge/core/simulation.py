@@ -111,6 +111,8 @@ def words_for(point: Point, value: object, image: Image) -> dict[Cell, int]:
     cells: dict[Cell, int] = {}
     for write in encode(plain, value, image):
         cells |= stored_cells(write)
+    if point.table is Table.DISCRETE:  # encoded as a coil write: the bit is the input's
+        return {(Table.DISCRETE, address): bit for (_, address), bit in cells.items()}
     return cells
 
 
