@@ -93,7 +93,8 @@ def convert_hub(hub: Node, result: Import) -> None:
     for kind in (*_CONVERTERS, *_NOT_CONVERTED):
         for node in _items(hub, kind, name, result):
             if bus is None:
-                result.note(node.where, f"{name}.{kind}", "its hub is not converted")
+                entity = str(node.get("name", kind))
+                result.note(node.where, entity, f"its hub {name!r} is not converted")
             elif kind in _NOT_CONVERTED:
                 result.note(node.where, f"{node.get('name', kind)}", _NOT_CONVERTED[kind])
             elif result.entities >= MAX_ENTITIES:

@@ -20,6 +20,74 @@ from bridge.importer.source import load_source
 DATA = Path(__file__).parent / "data"
 CASES = yaml.safe_load((DATA / "ha_sensor_values.yaml").read_text())["cases"]
 
+WHOLE = """\
+homeassistant:
+  name: Home
+modbus:
+  - name: Solar inverter
+    type: rtuovertcp
+    host: 192.0.2.7
+    port: 8899
+    timeout: 5
+    message_wait_milliseconds: 40
+    sensors:
+      - {name: PV power, address: 10, slave: 3, data_type: uint32, swap: word, scale: 0.1,
+         unit_of_measurement: W, device_class: power, state_class: measurement,
+         unique_id: pv_power, scan_interval: 10}
+      - {name: Grid voltage, address: 20, slave: 3, input_type: input, virtual_count: 2,
+         scale: 0.1, precision: 1, unit_of_measurement: V, device_class: voltage,
+         scan_interval: 60}
+    binary_sensors:
+      - {name: Fault, address: 4, slave: 3, input_type: discrete_input, device_class: problem}
+      - {name: Running, address: 30, slave: 3, input_type: holding}
+    switches:
+      - {name: Export limit, address: 200, slave: 3, verify: {}}
+      - {name: Relay, address: 7, slave: 4, write_type: coil}
+  - name: Heat pump
+    type: serial
+    method: rtu
+    port: /dev/ttyUSB0
+    baudrate: 19200
+    bytesize: 8
+    parity: E
+    stopbits: 1
+    sensors:
+      - {name: Flow temperature, address: 1, slave: 1, scale: 0.1,
+         unit_of_measurement: "°C", device_class: temperature}
+"""
+EVERY_KEY = """\
+modbus:
+  - name: hub
+    type: tcp
+    host: 127.0.0.1
+    port: 502
+    delay: 3
+    retries: 3
+    sensors:
+      - name: Energy
+        address: 1
+        slave: 1
+        data_type: float64
+      - name: Power
+        address: 5
+        slave: 1
+        zero_suppress: 2
+        min_value: 0
+        lazy_error_count: 3
+    switches:
+      - {name: Mode, address: 9, slave: 1, command_on: 0xFF, command_off: 0}
+    climates:
+      - {name: Room, address: 1, slave: 1, target_temp_register: 2}
+    covers:
+      - {name: Shutter, address: 3, slave: 1}
+  - name: far
+    type: udp
+    host: 192.0.2.1
+    port: 502
+    sensors:
+      - {name: Lost, address: 1, slave: 1}
+"""
+
 
 def convert(tmp_path: Path, text: str, name: str = "configuration.yaml") -> Import:
     path = tmp_path / name
@@ -63,41 +131,7 @@ def test_home_assistant_sensor_cases_decode_to_the_same_state(
 
 
 def test_a_whole_configuration_becomes_buses_devices_and_mappings(tmp_path: Path) -> None:
-    text = """\
-homeassistant:
-  name: Home
-modbus:
-  - name: Solar inverter
-    type: rtuovertcp
-    host: 192.0.2.7
-    port: 8899
-    timeout: 5
-    message_wait_milliseconds: 40
-    sensors:
-      - {name: PV power, address: 10, slave: 3, data_type: uint32, swap: word, scale: 0.1,
-         unit_of_measurement: W, device_class: power, state_class: measurement,
-         unique_id: pv_power, scan_interval: 10}
-      - {name: Grid voltage, address: 20, slave: 3, input_type: input, virtual_count: 2,
-         scale: 0.1, precision: 1, unit_of_measurement: V, device_class: voltage,
-         scan_interval: 60}
-    binary_sensors:
-      - {name: Fault, address: 4, slave: 3, input_type: discrete_input, device_class: problem}
-      - {name: Running, address: 30, slave: 3, input_type: holding}
-    switches:
-      - {name: Export limit, address: 200, slave: 3, verify: {}}
-      - {name: Relay, address: 7, slave: 4, write_type: coil}
-  - name: Heat pump
-    type: serial
-    method: rtu
-    port: /dev/ttyUSB0
-    baudrate: 19200
-    bytesize: 8
-    parity: E
-    stopbits: 1
-    sensors:
-      - {name: Flow temperature, address: 1, slave: 1, scale: 0.1,
-         unit_of_measurement: "°C", device_class: temperature}
-"""
+    text = WHOLE
     result = convert(tmp_path, text)
     assert result.buses == [
         {
@@ -188,38 +222,7 @@ modbus:
 
 
 def test_every_key_left_out_is_reported_with_its_line(tmp_path: Path) -> None:
-    text = """\
-modbus:
-  - name: hub
-    type: tcp
-    host: 127.0.0.1
-    port: 502
-    delay: 3
-    retries: 3
-    sensors:
-      - name: Energy
-        address: 1
-        slave: 1
-        data_type: float64
-      - name: Power
-        address: 5
-        slave: 1
-        zero_suppress: 2
-        min_value: 0
-        lazy_error_count: 3
-    switches:
-      - {name: Mode, address: 9, slave: 1, command_on: 0xFF, command_off: 0}
-    climates:
-      - {name: Room, address: 1, slave: 1, target_temp_register: 2}
-    covers:
-      - {name: Shutter, address: 3, slave: 1}
-  - name: far
-    type: udp
-    host: 192.0.2.1
-    port: 502
-    sensors:
-      - {name: Lost, address: 1, slave: 1}
-"""
+    text = EVERY_KEY
     result = convert(tmp_path, text)
     assert [(n.where.line, n.key, n.partly) for n in result.notes] == [
         (6, "hub.delay", False),
@@ -232,7 +235,7 @@ modbus:
         (22, "Room", False),
         (24, "Shutter", False),
         (26, "far.type", False),
-        (30, "far.sensors", False),
+        (30, "Lost", False),
     ]
     assert list(result.devices[0].mapping["entities"]) == ["power"]
 
