@@ -13,6 +13,7 @@ import yaml
 from bridge.core.codec import decode
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping
+from bridge.importer import ha_modbus
 from bridge.importer.ha_modbus import import_ha
 from bridge.importer.result import Import
 from bridge.importer.source import load_source
@@ -254,3 +255,12 @@ def test_nothing_usable_is_not_usable(tmp_path: Path) -> None:
     assert [str(n) for n in result.notes] == [
         "configuration.yaml:1: modbus: not converted: no modbus hub found"
     ]
+
+
+def test_the_number_of_entities_is_bounded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ha_modbus, "MAX_ENTITIES", 3)
+    sensors = [{"name": f"S{n}", "address": n, "slave": 1} for n in range(5)]
+    hub = {"name": "hub", "type": "tcp", "host": "127.0.0.1", "port": 502, "sensors": sensors}
+    result = convert(tmp_path, yaml.safe_dump({"modbus": [hub]}))
+    assert list(result.devices[0].mapping["entities"]) == ["s0", "s1", "s2"]
+    assert [n.reason for n in result.notes] == ["more than 3 entities: not converted"] * 2

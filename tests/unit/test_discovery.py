@@ -160,6 +160,19 @@ def test_default_entity_id_is_a_slug_of_the_device_id() -> None:
     assert "object_id" not in config
 
 
+def test_an_entity_asks_for_its_own_entity_id_when_it_names_one() -> None:
+    """An imported entity keeps the id Home Assistant's modbus gave it (``ha.entity_id``);
+    its unique id stays the bridge's, and a read-only fallback asks for the same id."""
+    config = _one({"ha": {"entity_id": "water_temperature"}}, id="boiler")
+    assert config is not None
+    assert config["default_entity_id"] == "sensor.water_temperature"
+    assert config["unique_id"] == "modbus_boiler_value"
+    guarded = {"access": "rw", "dangerous": True, "ha": {"entity_id": "setpoint"}}
+    shown = _one(guarded, id="boiler")
+    assert shown is not None
+    assert (shown["platform"], shown["default_entity_id"]) == ("sensor", "sensor.setpoint")
+
+
 # --- read-only platforms ------------------------------------------------------------------
 
 
