@@ -100,8 +100,12 @@ def render_report(result: Import) -> str:
     return f"{result.source}: {len(result.notes)} key(s) not converted or converted in part\n{rows}"
 
 
-class _Dumper(yaml.SafeDumper):
-    """Writes every value out, never as an ``&anchor``/``*alias`` pair."""
+_SafeDumper: type[yaml.SafeDumper] = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+class _Dumper(_SafeDumper):  # type: ignore[valid-type,misc]
+    """libyaml's safe dumper (when PyYAML has it: the files of 10,000 entities in a
+    fraction of the time), writing every value out, never as an ``&anchor``/``*alias``."""
 
     def ignore_aliases(self, data: Any) -> bool:  # noqa: ARG002 - PyYAML's signature
         return True
