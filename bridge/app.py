@@ -66,6 +66,7 @@ from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
 from bridge.errors import ValueRejectedError, first_of
+from bridge.gateway import Gateway
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DeviceUpdate
@@ -126,6 +127,7 @@ class Bridge:
             error=self._error,
             read=self.state.again,  # a /get: its state, changed or not
         )
+        self.gateway = Gateway(loaded, self.engine, self.dispatcher)  # other Modbus masters
         self._requests = 0  # management requests running
         self._group: asyncio.TaskGroup | None = None
         self._health = HealthReporter()  # rates since the previous report
@@ -147,6 +149,7 @@ class Bridge:
         async with metrics, web, asyncio.TaskGroup() as group:
             self._group = group
             self._engine = group.create_task(self.engine.run(), name="engine")
+            group.create_task(self.gateway.run(), name="gateway")
             group.create_task(
                 run_with_reconnect(
                     self.mqtt,
@@ -284,6 +287,8 @@ class Bridge:
                 "coalesced": counters.coalesced,
                 "dropped": self.state.dropped,
             }
+            if self.gateway.settings.enabled:
+                report["gateway"] = self.gateway.health()
             await client.publish(self.topics.bridge_health, compact(report), retain=True)
             await asyncio.sleep(interval)
 

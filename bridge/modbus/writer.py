@@ -126,6 +126,7 @@ class DeviceWriter:
             raise
         for write in writes:
             self.state.store(write)
+            self.state.stamp(stored(write), time.monotonic())
         self.counters.done += len(plan)  # per key, like skipped_unchanged
         written = [p for p in points if p.key in plan]
         for point in written:
