@@ -259,3 +259,34 @@ async def test_a_write_goes_through_the_command_checks_and_is_read_back() -> Non
         ]
         assert len(sim.writes) == written  # nothing more reached the wire
         assert gateway.book.totals().refused == 4
+
+
+# --- the cache ----------------------------------------------------------------------------
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize(("max_age", "frames"), [(0.0, 1), (30.0, 0)])
+async def test_a_read_of_what_the_bridge_polled_is_answered_from_its_image(
+    max_age: float, frames: int
+) -> None:
+    async with site(max_age=max_age) as (gateway, sim, engine), master(gateway) as client:
+        await eventually(lambda: engine.devices["starter"].first_poll_done)
+        reply = await client.read_holding_registers(4097, count=6, device_id=STARTER)
+        assert reply.registers == words(sim, STARTER, 4097, 6)
+        assert gateway.transactions["line"] == frames
+        assert gateway.book.totals().cached == 1 - frames
+
+
+@pytest.mark.asyncio
+async def test_a_write_is_in_the_image_and_a_cached_read_answers_it() -> None:
+    async with (
+        site(max_age=30.0, allow_writes=True) as (gateway, sim, engine),
+        master(gateway) as client,
+    ):
+        starter = engine.devices["starter"]
+        await eventually(lambda: starter.first_poll_done and starter.health.online)
+        assert not (await client.write_register(4101, 25, device_id=STARTER)).isError()
+        before = gateway.transactions["line"]
+        reply = await client.read_holding_registers(4101, count=1, device_id=STARTER)
+        assert reply.registers == [25] == words(sim, STARTER, 4101, 1)
+        assert gateway.transactions["line"] == before  # the write left it in the image
