@@ -36,6 +36,7 @@ from typing import Any, Protocol
 from bridge import __version__
 from bridge.config import LoadedConfig
 from bridge.core.topics import Topics
+from bridge.gateway import Gateway
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.web.access import Access, Refusal, change_refusal
@@ -85,6 +86,8 @@ class BridgeState(Protocol):
     def topics(self) -> Topics: ...
     @property
     def feed(self) -> WebFeed: ...
+    @property
+    def gateway(self) -> Gateway: ...
     @property
     def mqtt_state(self) -> str: ...
     @property
@@ -197,6 +200,7 @@ class WebApp:
             subscriptions=bridge.mqtt_subscriptions,
             raw_writes=bridge.loaded.config.bridge.allow_raw_writes,
             refused=bridge.feed.refused,
+            gateway=bridge.gateway.health() if bridge.gateway.settings.enabled else None,
         )
 
     def device(self, device_id: str) -> dict[str, Any] | None:
