@@ -33,6 +33,7 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 from bridge.config import GatewayConfig, LoadedConfig
+from bridge.core.address import to_wire
 from bridge.core.codec import COMMAND_PRESS, Value, decode, encode
 from bridge.core.entity import Table
 from bridge.core.gateway import (
@@ -194,6 +195,17 @@ class Gateway:
                 "not mapped as writable; set gateway_raw_writes: true for the device to permit it",
             )
         write = request.write(poller.protocol.coil_on_value)
+        unlock = poller.protocol.unlock
+        if unlock is not None and unlock.lock is not None and device.has_password:
+            lock = to_wire(unlock.lock, poller.protocol.addressing)
+            if write.table is Table.HOLDING and lock in range(
+                write.address, write.address + request.count
+            ):
+                raise GatewayRefusalError(
+                    Code.ILLEGAL_FUNCTION,
+                    f"{device.id}: register {lock} locks the device, which the bridge unlocks "
+                    "again with the password in its config",
+                )
         guarded = poller.state.guard.dangerous_in(write.table, write.address, request.values)
         if guarded and not device.allow_dangerous_writes:
             raise GatewayRefusalError(

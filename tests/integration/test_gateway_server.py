@@ -19,6 +19,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from bridge.config import load_config_data
 from bridge.core.entity import Table
+from bridge.core.request import Write
 from bridge.dispatcher import Dispatcher
 from bridge.gateway import Gateway
 from bridge.modbus.engine import Engine
@@ -37,8 +38,11 @@ PUMP, STARTER = 1, 3  # units on the line: Nastec (one register per read), soft 
 
 
 @contextlib.asynccontextmanager
-async def site(**gateway: Any) -> AsyncIterator[tuple[Gateway, Simulator, Engine]]:
-    """Two devices polled on one RTU line; the gateway on a free loopback port."""
+async def site(
+    starter: dict[str, Any] | None = None, **gateway: Any
+) -> AsyncIterator[tuple[Gateway, Simulator, Engine]]:
+    """Two devices polled on one RTU line; the gateway on a free loopback port;
+    ``starter``: more settings of the soft starter's device config."""
     sim = simulator((PUMP, "nastec_vasco"), (STARTER, "soft_starter"))
     async with serving_serial(sim, baudrate=38400) as path:
         settings = {"enabled": True, "port": 0, "units": {1: "pump", 3: "starter"}} | gateway
@@ -51,7 +55,8 @@ async def site(**gateway: Any) -> AsyncIterator[tuple[Gateway, Simulator, Engine
                 ],
                 "devices": [
                     {"id": "pump", "bus": "line", "unit": PUMP, "mapping": "nastec_vasco"},
-                    {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"},
+                    {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"}
+                    | (starter or {}),
                 ],
             },
             Path("gateway-test.yaml"),
@@ -290,3 +295,24 @@ async def test_a_write_is_in_the_image_and_a_cached_read_answers_it() -> None:
         reply = await client.read_holding_registers(4101, count=1, device_id=STARTER)
         assert reply.registers == [25] == words(sim, STARTER, 4101, 1)
         assert gateway.transactions["line"] == before  # the write left it in the image
+
+
+@pytest.mark.asyncio
+async def test_unmapped_words_go_raw_only_where_the_device_allows_it_and_never_guarded() -> None:
+    async with (
+        site(starter={"gateway_raw_writes": True}, allow_writes=True) as (
+            gateway,
+            sim,
+            engine,
+        ),
+        master(gateway) as client,
+    ):
+        await eventually(lambda: engine.devices["starter"].health.online)
+        raw = await client.write_register(4000, 7, device_id=STARTER)
+        assert sim.writes[-1] == (STARTER, Write(6, H, 4000, (7,)))  # on the wire
+        assert raw.isError() and raw.exception_code == 2  # the simulator has no 4000
+        written = len(sim.writes)
+        # 4096 is unmapped, 4098 (current_range) guarded: the whole write is refused
+        mixed = await client.write_registers(4096, [1, 2, 3], device_id=STARTER)
+        assert mixed.isError() and mixed.exception_code == 0x01
+        assert len(sim.writes) == written
