@@ -4,8 +4,11 @@ connection, and the per-client counters."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
+from bridge.config import load_config_data
 from bridge.core.entity import Table
 from bridge.core.gateway import (
     ClientBook,
@@ -22,6 +25,7 @@ from bridge.errors import (
     BusError,
     CommandExpiredError,
     CommandRejectedError,
+    ConfigError,
     DeviceExceptionError,
     DeviceTimeoutError,
     FrameError,
@@ -143,3 +147,38 @@ def test_clients_are_counted_by_address_and_the_oldest_idle_forgotten() -> None:
     everyone_busy.of("a").queued = 1
     everyone_busy.of("b").queued = 1
     assert list(everyone_busy.clients) == ["a", "b"]  # never forgets one still waiting
+
+
+def test_a_bad_gateway_config_names_the_field() -> None:
+    data = {
+        "bridge": {
+            "gateway": {
+                "enabled": True,
+                "units": {
+                    1: "pump",
+                    2: "nope",
+                    3: "spare",
+                    4: {"bus": "nowhere", "unit": 1},
+                    5: {"bus": "rs485", "unit": 250},
+                },
+            }
+        },
+        "buses": [{"id": "rs485", "transport": "rtu", "port": "/dev/null"}],
+        "devices": [
+            {"id": "pump", "bus": "rs485", "unit": 1, "mapping": "nastec_vasco"},
+            {"id": "spare", "bus": "rs485", "unit": 2, "mapping": "nastec_vasco", "enabled": False},
+        ],
+    }
+    with pytest.raises(ConfigError) as caught:
+        load_config_data(data, Path("gateway.yaml"))
+    assert list(caught.value.issues) == [
+        "bridge.gateway.units.2: no device 'nope' (have ['pump', 'spare'])",
+        "bridge.gateway.units.3: device 'spare' is disabled",
+        "bridge.gateway.units.4.bus: no bus 'nowhere' (have ['rs485'])",
+        "bridge.gateway.units.5.unit: serial lines address units 1..247",
+    ]
+    data["bridge"] = {"gateway": {"enabled": True}}
+    with pytest.raises(ConfigError, match=r"bridge.gateway.units: name the units"):
+        load_config_data(data, Path("gateway.yaml"))
+    del data["bridge"]
+    assert not load_config_data(data, Path("gateway.yaml")).config.bridge.gateway.enabled
