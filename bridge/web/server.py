@@ -31,12 +31,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from bridge import __version__
 from bridge.config import LoadedConfig
 from bridge.core.topics import Topics
-from bridge.gateway import Gateway
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.web.access import Access, Refusal, change_refusal
@@ -56,6 +55,9 @@ STATIC = {
 }
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
+if TYPE_CHECKING:
+    from bridge.gateway import Gateway
+
 log = logging.getLogger(__name__)
 
 
@@ -87,7 +89,7 @@ class BridgeState(Protocol):
     @property
     def feed(self) -> WebFeed: ...
     @property
-    def gateway(self) -> Gateway: ...
+    def gateway(self) -> Gateway | None: ...
     @property
     def mqtt_state(self) -> str: ...
     @property
@@ -200,7 +202,7 @@ class WebApp:
             subscriptions=bridge.mqtt_subscriptions,
             raw_writes=bridge.loaded.config.bridge.allow_raw_writes,
             refused=bridge.feed.refused,
-            gateway=bridge.gateway.health() if bridge.gateway.settings.enabled else None,
+            gateway=bridge.gateway.health() if bridge.gateway is not None else None,
         )
 
     def device(self, device_id: str) -> dict[str, Any] | None:
