@@ -11,7 +11,11 @@ bus that owns the unit it names, between the bridge's own polls. What is decided
 - which exception code answers a failure (``code_for``): the device's own code as it
   sent it; 0x0B (gateway target failed to respond) when it stayed silent or garbled its
   reply; 0x0A (gateway path unavailable) for a unit the gateway does not map or a bus that
-  is down; 0x06 (busy) when the client or the bus has too many requests waiting;
+  is down; 0x06 (busy) when the client or the bus has too many requests waiting. A write
+  the writer refuses answers by the error's type, never its wording: 0x01 when the entity
+  may not be written whatever the value (``WriteForbiddenError``: read-only, guarded, a
+  lock, conditions unmet, too soon after the last write), 0x03 when the value is refused
+  (range, enum, sentinel);
 - whether a read can be answered from the bridge's own image (``cached_words``): every
   register (or bit) of it read or written no longer than ``max_age`` seconds ago;
 - whether a client's first bytes are Modbus TCP at all (``header_problem``): protocol id
@@ -139,16 +143,9 @@ def code_for(error: BridgeError) -> int:
         return Code.PATH_UNAVAILABLE
     if isinstance(error, CommandExpiredError):
         return Code.BUSY
-    if isinstance(error, ValueRejectedError):
-        return refusal_code(str(error))
+    if isinstance(error, ValueRejectedError):  # by its kind, never by its wording
+        return Code.ILLEGAL_FUNCTION if error.forbidden else Code.ILLEGAL_VALUE
     return Code.DEVICE_FAILURE
-
-
-def refusal_code(reason: str) -> Code:
-    """A refused write: 0x01 when the register may not be written this way (read-only,
-    guarded, unmapped, too soon, a lock), 0x03 when the value is what is refused."""
-    words = ("read-only", "guarded", "not mapped", "EEPROM", "again within", "lock", "no such")
-    return Code.ILLEGAL_FUNCTION if any(w in reason for w in words) else Code.ILLEGAL_VALUE
 
 
 def cached_words(

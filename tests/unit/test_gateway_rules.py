@@ -31,6 +31,7 @@ from bridge.errors import (
     FrameError,
     PartialWriteError,
     ValueRejectedError,
+    WriteForbiddenError,
 )
 
 H, C = Table.HOLDING, Table.COIL
@@ -84,11 +85,21 @@ def test_a_request_names_its_table_and_its_bus_request() -> None:
         (PartialWriteError(1, 2, restored=True, cause=FrameError("x")), Code.TARGET_NO_RESPONSE),
         (BusError("port gone"), Code.PATH_UNAVAILABLE),
         (CommandExpiredError("busy"), Code.BUSY),
-        (ValueRejectedError("ramp is read-only"), Code.ILLEGAL_FUNCTION),
-        (ValueRejectedError("x is a guarded write (dangerous)"), Code.ILLEGAL_FUNCTION),
-        (ValueRejectedError("x is stored in EEPROM: next write allowed in 3 s"), 1),
+        # a refused write by its type, whatever its words say
+        (WriteForbiddenError("ramp is read-only"), Code.ILLEGAL_FUNCTION),
+        (WriteForbiddenError("any wording at all"), Code.ILLEGAL_FUNCTION),
         (ValueRejectedError("value 201 above the maximum 200"), Code.ILLEGAL_VALUE),
-        (CommandRejectedError({"x": "201: above 200"}, ["x"]), Code.ILLEGAL_VALUE),
+        (ValueRejectedError("mode: 'locked' is not one of 'manual', 'auto'"), 3),
+        (ValueRejectedError("x is a guarded write, read-only, EEPROM, no such"), 3),
+        (CommandRejectedError({"x": ValueRejectedError("201: above 200")}, ["x"]), 3),
+        (CommandRejectedError({"x": WriteForbiddenError("201: above 200")}, ["x", "y"]), 1),
+        (
+            CommandRejectedError(
+                {"x": ValueRejectedError("201: above 200"), "y": WriteForbiddenError("too soon")},
+                ["x", "y"],
+            ),
+            Code.ILLEGAL_FUNCTION,  # fixing the value would not let y through
+        ),
         (BridgeError("anything else"), Code.DEVICE_FAILURE),
     ],
 )
