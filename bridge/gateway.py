@@ -18,8 +18,15 @@ bridge/core/gateway.py):
   commands, the offline check and the command expiry; then the writer's checks: writable,
   type, range, enum, the dangerous-write guard, EEPROM spacing, a password lock), read
   back and published. Words no writable entity covers are refused (0x01) unless the
-  device sets ``gateway_raw_writes``; then they go raw, still refused when they touch a
-  guarded register without ``allow_dangerous_writes``. A refusal never reaches the bus.
+  device sets ``gateway_raw_writes``; then they go raw under the rule of raw writes
+  (bridge/core/reach.py ``check_raw_write``: the guard of every device that may answer
+  the unit, ``allow_dangerous_writes``), never to the register that locks a device whose
+  password the bridge holds. A refusal never reaches the bus.
+- a read of a secret or write-only register (a password) of any device that may answer
+  the unit answers 0x02 (illegal data address: what a device answers for an address it
+  does not serve), from the bus and from the image alike, unless
+  ``bridge.allow_raw_writes`` permits raw reads of them (the rule of raw reads,
+  ``check_raw_read``).
 - at most ``max_queued_per_bus`` gateway requests wait per bus; more answer 0x06.
 """
 
@@ -32,7 +39,7 @@ from collections import Counter
 from collections.abc import AsyncIterator
 from typing import Any
 
-from bridge.config import GatewayConfig, LoadedConfig
+from bridge.config import GatewayConfig, LoadedConfig, TcpBus
 from bridge.core.address import to_wire
 from bridge.core.codec import COMMAND_PRESS, Value, decode, encode
 from bridge.core.entity import Table
@@ -48,10 +55,13 @@ from bridge.core.gateway import (
     check_request,
     code_for,
 )
+from bridge.core.management_request import RequestError
 from bridge.core.mapping import Point
+from bridge.core.reach import check_raw_read, check_raw_write
 from bridge.core.request import Read, Write
 from bridge.dispatcher import Dispatcher
 from bridge.errors import BridgeError, ValueRejectedError
+from bridge.management import reach_at
 from bridge.modbus.commission import Submit, read_in_parts, scheduler_submit
 from bridge.modbus.engine import Engine
 from bridge.modbus.gateway_server import GatewayServer, Limits
@@ -74,6 +84,7 @@ class Gateway:
     """Answers the requests of other masters for one bridge."""
 
     def __init__(self, loaded: LoadedConfig, engine: Engine, dispatcher: Dispatcher) -> None:
+        self.loaded = loaded
         self.settings: GatewayConfig = loaded.config.bridge.gateway
         self.engine = engine
         self.dispatcher = dispatcher
@@ -115,7 +126,9 @@ class Gateway:
             if request.is_write:
                 values = await self._write(route, request)
             else:
-                values = await self._read(client, route, request.read())
+                read = request.read()
+                self._check_read(route, read)
+                values = await self._read(client, route, read)
         except GatewayRefusalError as refusal:
             client.refused += 1
             if request.is_write:
@@ -132,6 +145,17 @@ class Gateway:
         return values
 
     # --- reads ---------------------------------------------------------------------------
+
+    def _check_read(self, route: Route, read: Read) -> None:
+        """0x02 for a read of a secret or write-only cell of any device that may answer the
+        route's unit, from the bus or the image alike, unless ``bridge.allow_raw_writes``
+        (the rule of raw reads: bridge/core/reach.py)."""
+        reach = reach_at(self.loaded, self.engine, route.bus, route.unit)
+        allowed = self.loaded.config.bridge.allow_raw_writes
+        try:
+            check_raw_read(reach, read, secrets_allowed=allowed)
+        except RequestError as hidden:
+            raise GatewayRefusalError(Code.ILLEGAL_ADDRESS, str(hidden)) from None
 
     async def _read(self, client: ClientCounters, route: Route, read: Read) -> tuple[int, ...]:
         poller = self._device(route)
@@ -206,13 +230,13 @@ class Gateway:
                     f"{device.id}: register {lock} locks the device, which the bridge unlocks "
                     "again with the password in its config",
                 )
-        guarded = poller.state.guard.dangerous_in(write.table, write.address, request.values)
-        if guarded and not device.allow_dangerous_writes:
-            raise GatewayRefusalError(
-                Code.ILLEGAL_FUNCTION,
-                f"{device.id}: addresses {guarded} are guarded (dangerous); set "
-                "allow_dangerous_writes: true for the device to permit it",
-            )
+        bus = self.engine.schedulers[device.bus].transport.bus
+        raw_units = bus.raw_units if isinstance(bus, TcpBus) else ()
+        reach = reach_at(self.loaded, self.engine, device.bus, device.unit)
+        try:  # the rule of raw writes: every device that may answer the unit, its guard
+            check_raw_write(reach, write, raw_units)
+        except RequestError as refused:
+            raise GatewayRefusalError(Code.ILLEGAL_FUNCTION, str(refused)) from None
         return write
 
     # --- shared --------------------------------------------------------------------------

@@ -16,6 +16,11 @@ bus that owns the unit it names, between the bridge's own polls. What is decided
   may not be written whatever the value (``WriteForbiddenError``: read-only, guarded, a
   lock, conditions unmet, too soon after the last write), 0x03 when the value is refused
   (range, enum, sentinel);
+- a read of a secret or write-only register (a password; bridge/gateway.py checks it with
+  the rule of raw reads, bridge/core/reach.py) answers 0x02, illegal data address, from
+  the bus and from the image alike: the code a device gives for an address it does not
+  serve, so a master treats it as a hole (HA's modbus, mbpoll, pymodbus do), not as a
+  function it may retry some other way (0x01) or a bad count (0x03);
 - whether a read can be answered from the bridge's own image (``cached_words``): every
   register (or bit) of it read or written no longer than ``max_age`` seconds ago;
 - whether a client's first bytes are Modbus TCP at all (``header_problem``): protocol id
