@@ -17,11 +17,13 @@ bridge/core/gateway.py):
   run as one MQTT command would (``Dispatcher.write_for``: after the device's waiting
   commands, the offline check and the command expiry; then the writer's checks: writable,
   type, range, enum, the dangerous-write guard, EEPROM spacing, a password lock), read
-  back and published. Words no writable entity covers are refused (0x01) unless the
-  device sets ``gateway_raw_writes``; then they go raw under the rule of raw writes
-  (bridge/core/reach.py ``check_raw_write``: the guard of every device that may answer
-  the unit, ``allow_dangerous_writes``), never to the register that locks a device whose
-  password the bridge holds. A refusal never reaches the bus.
+  back and published; words that mean no value the entity is set to by exactly those
+  words (a NaN, a sentinel, an enum code without a label) answer 0x03. Words no writable
+  entity covers are refused (0x01) unless the device sets ``gateway_raw_writes``; then
+  they go raw under the rule of raw writes (bridge/core/reach.py ``check_raw_write``: the
+  guard of every device that may answer the unit, ``allow_dangerous_writes``), never to
+  the register that locks a device whose password the bridge holds, and never together
+  with an entity's words (0x01). A refusal never reaches the bus.
 - a read of a secret or write-only register (a password) of any device that may answer
   the unit answers 0x02 (illegal data address: what a device answers for an address it
   does not serve), from the bus and from the image alike, unless
@@ -36,7 +38,7 @@ import contextlib
 import logging
 import time
 from collections import Counter
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from typing import Any
 
 from bridge.config import GatewayConfig, LoadedConfig, TcpBus
@@ -303,8 +305,10 @@ def _device_submit(poller: DevicePoller) -> Submit:
 
 def items_of(poller: DevicePoller, request: ProxyRequest) -> dict[str, object] | None:
     """The command a write of words amounts to: each writable entity whose words it writes,
-    with the value those words mean; None when a word is no writable entity's. GatewayRefusalError
-    (0x03) for an entity written in part, or a command word no button sends."""
+    with the value those words mean; None when no word is a writable entity's (a raw write).
+    GatewayRefusalError: 0x03 for an entity written in part, a command word no button
+    sends, words that mean no value (``_value``); 0x01 for a toggle or pulse, and for
+    entities written with words no entity covers (raw, they would skip the checks)."""
     table = request.table
     cells: dict[Cell, int] = {(table, request.address + i): v for i, v in enumerate(request.values)}
     items: dict[str, object] = {}
@@ -341,7 +345,43 @@ def items_of(poller: DevicePoller, request: ProxyRequest) -> dict[str, object] |
         raise GatewayRefusalError(
             Code.ILLEGAL_VALUE, "no command of this register writes that word"
         )
+    _check_kept_bits(poller.points.values(), cells, covered, poller.state.image)
+    if missing and covered:  # raw, they would skip the entities' checks (range, spacing)
+        raise GatewayRefusalError(
+            Code.ILLEGAL_FUNCTION,
+            f"{', '.join(items)} written with registers no writable entity covers: write "
+            "them on their own",
+        )
     return None if missing else items
+
+
+def _check_kept_bits(
+    points: Iterable[Point], cells: dict[Cell, int], covered: set[Cell], image: dict[Cell, int]
+) -> None:
+    """A register whose writable entities are bit fields: the writer writes their bits
+    and keeps the device's others. 0x03 unless the master sent those others as the bridge
+    last read them, so a write never answers success for bits that were not written."""
+    masks: dict[Cell, int] = {}
+    for point in points:
+        entity = point.entity
+        if not entity.writable or point.table.is_bits:
+            continue
+        width = entity.field_width
+        mask = 0xFFFF if width is None else ((1 << width) - 1) << (entity.bit or 0)
+        for offset in range(point.count):
+            cell = (Table.HOLDING, point.write_address + offset)
+            if cell in covered:
+                masks[cell] = masks.get(cell, 0) | mask
+    for cell, mask in masks.items():
+        kept = ~mask & 0xFFFF
+        held = image.get(cell)
+        if kept and (held is None or (cells[cell] ^ held) & kept):
+            shown = "not read yet" if held is None else f"{held & kept:#06x}"
+            raise GatewayRefusalError(
+                Code.ILLEGAL_VALUE,
+                f"register {cell[1]}: bits {kept:#06x} are no entity's; the device keeps "
+                f"them ({shown}): send them as it holds them",
+            )
 
 
 def _presses(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> bool:
@@ -353,11 +393,38 @@ def _presses(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> bo
 
 
 def _value(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> Value:
-    """What ``words`` written at the entity's write address mean, read as the entity."""
+    """What ``words`` written at the entity's write address mean, read as the entity.
+
+    GatewayRefusalError (0x03) unless they mean a value the entity is set to by exactly
+    these words: never a sentinel or a NaN (no value), an enum code without a label, a
+    register the value needs that was not read yet, or words the bridge would write
+    otherwise (7 to an on/off register, digits beyond the entity's precision). Nothing of
+    the request is written then."""
     seen = dict(image)
     for offset, word in enumerate(words):
         seen[(point.table, point.address + offset)] = word
     try:
-        return decode(point, seen)
-    except BridgeError:
-        return None
+        value = decode(point, seen)
+        writes = encode(point, value, seen)
+    except BridgeError as error:
+        raise GatewayRefusalError(
+            Code.ILLEGAL_VALUE, f"{point.key}: {list(words)} is no value it takes ({error})"
+        ) from None
+    written = {cell: word for w in writes for cell, word in _cells_of(w).items()}
+    space = Table.COIL if point.table is Table.COIL else Table.HOLDING
+    wanted = {(space, point.write_address + i): word for i, word in enumerate(words)}
+    if written != wanted:
+        raise GatewayRefusalError(
+            Code.ILLEGAL_VALUE,
+            f"{point.key}: {list(words)} reads as {value!r}, which the bridge writes as "
+            f"{sorted(written.values())}",
+        )
+    return value
+
+
+def _cells_of(write: Write) -> dict[Cell, int]:
+    """The cells a write sets, coils as 0/1 (FC05 sends its ON word)."""
+    values = write.values
+    if write.function == 5:
+        values = (1 if values[0] else 0,)
+    return {(write.table, write.address + i): v for i, v in enumerate(values)}

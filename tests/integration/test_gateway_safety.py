@@ -4,8 +4,15 @@
   ``bridge.allow_raw_writes`` permits raw reads of it: alone, inside a range, from the
   bus or from the bridge's image, by the unit of its device or, on a TCP bus, by a unit
   its device may answer as. The answer is 0x02 and nothing goes to the bus.
-- A raw write (``gateway_raw_writes``) keeps the guard a device had before a mapping
-  reload (the rule of raw writes, bridge/core/reach.py).
+- Every refusal the writer can make is answered with one exception code, pinned here per
+  refusal (0x01: may not be written; 0x03: the value), and nothing reaches the wire.
+- Words that mean no value (a NaN, a sentinel, an enum code without a label, 7 to an
+  on/off register, digits beyond the entity's precision) are refused whole (0x03), and so
+  are bits of a word no entity has (the writer would keep the device's); FC15 writes its
+  count of coils, never its padding bits.
+- A raw write (``gateway_raw_writes``) never carries an entity's words past its checks,
+  and keeps the guard a device had before a mapping reload (the rule of raw writes,
+  bridge/core/reach.py).
 
 Real simulators (an RTU line on a pty, Modbus TCP on loopback), the real engine, writer,
 dispatcher and gateway; pymodbus' client as the hostile master.
@@ -15,11 +22,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import struct
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from pymodbus.client import AsyncModbusTcpClient
 
 from bridge.config import load_config_data
 from bridge.core.entity import Table
@@ -27,6 +36,7 @@ from bridge.core.mapping import load_mapping
 from bridge.dispatcher import Dispatcher
 from bridge.gateway import Gateway
 from bridge.modbus.engine import Engine
+from bridge.modbus.simulator import SimulatedUnit, Simulator
 from tests.integration.harness import (
     FAST_POLICY,
     cancel,
@@ -35,7 +45,15 @@ from tests.integration.harness import (
     serving_tcp,
     simulator,
 )
-from tests.integration.test_gateway_server import PUMP, STARTER, master, site, words
+from tests.integration.test_gateway_server import (
+    PUMP,
+    STARTER,
+    exchange,
+    frame,
+    master,
+    site,
+    words,
+)
 
 H = Table.HOLDING
 
@@ -150,7 +168,164 @@ async def test_on_a_tcp_bus_no_unit_reads_the_password_of_a_device_that_may_answ
             assert len(sim.writes) == written
 
 
+# --- every refusal of a write, its code ------------------------------------------------------
+
+REFUSALS = """
+manufacturer: Test
+model: Refusals
+description: one entity per refusal a write through the gateway can meet
+source: {title: test}
+entities:
+  level: {name: Level, address: 10, access: rw, min: 0, max: 100, step: 1}
+  mode: {name: Mode, address: 11, access: rw, enum: {0: manual, 1: auto}}
+  start: {name: Start, address: 12, access: rw, min: 0, max: 1, step: 1, requires: {mode: auto}}
+  reset: {name: Reset, address: 13, access: rw, min: 0, max: 1, step: 1, dangerous: true}
+  speed:
+    {name: Speed, address: 14, type: s16, access: rw, min: -100, max: 100, step: 1,
+     dangerous_below: 0}
+  param: {name: Param, address: 15, access: rw, min: 0, max: 100, step: 1, eeprom: true}
+  setpoint:
+    {name: Setpoint, address: 16, access: rw, min: 0, max: 100, step: 1, write_interval: 2s}
+  temp:
+    {name: Temp, address: 17, access: rw, min: 0, max: 40000, step: 1,
+     sentinels: {32767: unknown}}
+  ratio: {name: Ratio, address: 18, access: rw, min: 0, max: 65.535, scale: 0.001, precision: 1}
+  flow: {name: Flow, address: 20, type: f32, access: rw, min: -1000, max: 1000}
+  enabled: {name: Enabled, address: 22, type: bool, access: rw}
+  fan: {name: Fan, address: 24, bit: 0, access: rw}
+  heater: {name: Heater, address: 24, bit: 1, access: rw}
+  relay_a: {name: Relay A, address: 0, table: coil, access: rw}
+  relay_b: {name: Relay B, address: 1, table: coil, access: rw}
+  relay_c: {name: Relay C, address: 2, table: coil, access: rw}
+"""
+NAN = (0x7FC0, 0x0000)  # a float32 NaN
+
+
+@contextlib.asynccontextmanager
+async def refusals_site(folder: Path) -> AsyncIterator[tuple[Gateway, Simulator, Engine]]:
+    path = folder / "refusals.yaml"
+    path.write_text(REFUSALS)
+    sim = Simulator([SimulatedUnit(1, load_mapping(path))])
+    async with serving_tcp(sim) as port:
+        data = {
+            "bridge": {
+                "gateway": {"enabled": True, "port": 0, "allow_writes": True, "units": {1: "dev"}}
+            },
+            "buses": [
+                {"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port}
+                | {"timeout": 0.5, "retries": 0}
+            ],
+            "devices": [{"id": "dev", "bus": "tcp", "unit": 1, "mapping": str(path)}],
+        }
+        async with gateway_for(data, folder) as (gateway, engine):
+            device = engine.devices["dev"]
+            await eventually(lambda: device.first_poll_done and device.health.online)
+            yield gateway, sim, engine
+
+
+async def write(client: AsyncModbusTcpClient, address: int, values: tuple[int, ...]) -> int:
+    """The exception code of a write (0: written)."""
+    if len(values) == 1:
+        reply = await client.write_register(address, values[0], device_id=1)
+    else:
+        reply = await client.write_registers(address, list(values), device_id=1)
+    return int(reply.exception_code) if reply.isError() else 0
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize(
+    ("before", "address", "values", "code"),
+    [
+        ((), 10, (50,), 0),  # written: the site works
+        ((), 10, (101,), 0x03),  # the writer: outside min..max
+        ((), 12, (1,), 0x01),  # the writer: requires mode auto, which reads manual
+        ((), 11, (1, 1), 0x01),  # the writer: a key with conditions in a command of several
+        ((), 13, (1,), 0x01),  # the writer: guarded (dangerous)
+        ((), 14, (0xFFFF,), 0x01),  # the writer: -1, below dangerous_below
+        (((15, (5,)),), 15, (6,), 0x01),  # the writer: EEPROM spacing
+        (((16, (7,)),), 16, (8,), 0x01),  # the writer: write_interval
+        ((), 11, (5,), 0x03),  # the gateway: an enum code without a label
+        ((), 17, (32767,), 0x03),  # the gateway: the sentinel ("unknown")
+        ((), 20, NAN, 0x03),  # the gateway: a NaN float
+        ((), 18, (12345,), 0x03),  # the gateway: 12.345 shown as 12.3, written as 12300
+        ((), 22, (7,), 0x03),  # the gateway: 7 to an on/off register the bridge writes 1
+        ((), 10, (50, 3), 0x03),  # the gateway: mode 3 has no label, level 50 goes neither
+        ((), 24, (0x0003,), 0),  # fan and heater, bits 0 and 1 of one word: written
+        ((), 24, (0xFF01,), 0x03),  # the gateway: bits 8-15 are no entity's, the device's 0
+    ],
+    ids=[
+        "written",
+        "range",
+        "requires",
+        "conditions-alone",
+        "guarded",
+        "dangerous-below",
+        "eeprom-spacing",
+        "write-interval",
+        "enum-code",
+        "sentinel",
+        "nan",
+        "precision",
+        "bool-word",
+        "one-bad-word-refuses-all",
+        "bit-fields",
+        "bits-no-entity-has",
+    ],
+)
+async def test_each_refusal_answers_its_code_and_writes_nothing(
+    before: tuple[tuple[int, tuple[int, ...]], ...],
+    address: int,
+    values: tuple[int, ...],
+    code: int,
+    tmp_path: Path,
+) -> None:
+    async with refusals_site(tmp_path) as (gateway, sim, _), master(gateway) as client:
+        for earlier, words_ in before:
+            assert await write(client, earlier, words_) == 0
+        written = list(sim.writes)
+        assert await write(client, address, values) == code
+        if code:
+            assert sim.writes == written  # not a frame of it on the wire
+            assert gateway.book.totals().refused == 1
+        else:
+            assert [w.values for _, w in sim.writes[len(written) :]] == [values]
+
+
+@pytest.mark.asyncio
+async def test_fc15_writes_its_count_of_coils_never_the_padding_bits(tmp_path: Path) -> None:
+    """FC15 of 3 coils whose data byte has every padding bit set (0xFD: 1, 0, 1, then five
+    1s): relays A and C on, B off, and no coil beyond the third written."""
+    async with refusals_site(tmp_path) as (gateway, sim, _):
+        written = len(sim.writes)
+        pdu = struct.pack(">BHHB", 15, 0, 3, 1) + bytes([0xFD])
+        (reply,) = await exchange(gateway.server.port, frame(1, 1, pdu))
+        assert reply[7:] == struct.pack(">BHH", 15, 0, 3)
+        coils = {w.address: w.values for _, w in sim.writes[written:]}
+        assert sorted(coils) == [0, 1, 2]
+        assert [bool(coils[a][0]) for a in (0, 1, 2)] == [True, False, True]
+
+
 # --- raw writes ----------------------------------------------------------------------------
+
+
+@pytest.mark.asyncio
+async def test_a_raw_write_never_carries_an_entitys_words_past_its_checks() -> None:
+    """``gateway_raw_writes``: FC16 over energy_saving_slow_voltage (0..1200) and the
+    unmapped 4131 would go raw as one frame, past the entity's checks (5000 V and all); it
+    is refused whole. The unmapped register alone still goes raw."""
+    async with (
+        site(starter={"gateway_raw_writes": True}, allow_writes=True) as (gateway, sim, engine),
+        master(gateway) as client,
+    ):
+        await eventually(lambda: engine.devices["starter"].health.online)
+        written = len(sim.writes)
+        beyond = await client.write_registers(4130, [5000, 1], device_id=STARTER)
+        assert beyond.isError() and beyond.exception_code == 0x03  # 5000 V: no value it takes
+        mixed = await client.write_registers(4130, [600, 1], device_id=STARTER)
+        assert mixed.isError() and mixed.exception_code == 0x01  # 600 V, but raw
+        assert len(sim.writes) == written
+        alone = await client.write_register(4131, 1, device_id=STARTER)
+        assert sim.writes[-1][1].address == 4131, alone  # on the wire (the device may refuse)
 
 
 HARMLESS_ONLY = """

@@ -313,7 +313,10 @@ async def test_unmapped_words_go_raw_only_where_the_device_allows_it_and_never_g
         assert sim.writes[-1] == (STARTER, Write(6, H, 4000, (7,)))  # on the wire
         assert raw.isError() and raw.exception_code == 2  # the simulator has no 4000
         written = len(sim.writes)
-        # 4096 is unmapped, 4098 (current_range) guarded: the whole write is refused
-        mixed = await client.write_registers(4096, [1, 2, 3], device_id=STARTER)
+        # 4096 is unmapped, 4097 soft_start_mode, 4098 current_range (guarded): raw, the
+        # entities' words would skip their checks; the whole write is refused
+        mixed = await client.write_registers(4096, [1, 2, 100], device_id=STARTER)
         assert mixed.isError() and mixed.exception_code == 0x01
+        out_of_range = await client.write_registers(4096, [1, 2, 3], device_id=STARTER)
+        assert out_of_range.isError() and out_of_range.exception_code == 0x03  # 3 A: min 10
         assert len(sim.writes) == written
