@@ -72,6 +72,7 @@ from bridge.modbus.scheduler import Priority
 
 log = logging.getLogger(__name__)
 Cell = tuple[Table, int]
+MASKED = "***"  # what the log shows for the value of a secret register
 
 
 class GatewayRefusalError(BridgeError):
@@ -134,11 +135,11 @@ class Gateway:
         except GatewayRefusalError as refusal:
             client.refused += 1
             if request.is_write:
-                log.info("gateway: unit %d: write refused: %s", request.unit, refusal)
+                self._refused(request, refusal)
             return int(refusal.code)
         except ValueRejectedError as rejected:  # the writer's checks: nothing was sent
             client.refused += 1
-            log.info("gateway: unit %d: write refused: %s", request.unit, rejected)
+            self._refused(request, rejected)
             return code_for(rejected)
         except BridgeError as error:
             client.failed += 1
@@ -204,10 +205,16 @@ class Gateway:
                 write = self._raw(poller, request)
                 await poller.link.submit(write, Priority.WRITE, deadline=deadline)
                 poller.state.store(write)
-                log.info("gateway: %s: raw %s written", device_id, write)
+                shown = MASKED if _hidden(poller, request) else write
+                log.info("gateway: %s: raw %s written", device_id, shown)
             else:
                 done = await self.dispatcher.write_for(device_id, items, deadline)
-                log.info("gateway: %s: %s written", device_id, done)
+                secret = {k for k in done if poller.points[k].entity.secret}
+                log.info(
+                    "gateway: %s: %s written",
+                    device_id,
+                    {k: MASKED if k in secret else v for k, v in done.items()},
+                )
         self.transactions[route.bus] += 1
         return request.values
 
@@ -243,6 +250,16 @@ class Gateway:
 
     # --- shared --------------------------------------------------------------------------
 
+    def _refused(self, request: ProxyRequest, refusal: BridgeError) -> None:
+        """Log a refused write; without its reason when it writes a secret register (the
+        reason may quote the value: a password tried)."""
+        route = self.routes.get(request.unit)
+        poller = self._device(route) if route is not None else None
+        reason = str(refusal)
+        if poller is not None and _hidden(poller, request):
+            reason = "a write of secret registers (the reason may quote the value: not logged)"
+        log.info("gateway: unit %d: write refused: %s", request.unit, reason)
+
     def _device(self, route: Route) -> DevicePoller | None:
         return self.engine.devices.get(route.device) if route.device is not None else None
 
@@ -267,6 +284,11 @@ class Gateway:
             "total": self.book.totals().as_dict(),
             "bus_transactions": dict(self.transactions),
         }
+
+
+def _hidden(poller: DevicePoller, request: ProxyRequest) -> bool:
+    """The request writes a secret or write-only register of the device (a password)."""
+    return bool(poller.guard.hidden_in(request.table, request.address, request.count))
 
 
 def routes_of(loaded: LoadedConfig) -> dict[int, Route]:

@@ -1,5 +1,7 @@
 """The gateway (bridge/gateway.py) attacked by another master: what it may read and write.
 
+- A password written through the gateway is not logged (masked, or the refusal's reason
+  left out).
 - A password (a ``secret`` or write-only entity) is never read through the gateway unless
   ``bridge.allow_raw_writes`` permits raw reads of it: alone, inside a range, from the
   bus or from the bridge's image, by the unit of its device or, on a TCP bus, by a unit
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import struct
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -166,6 +169,31 @@ async def test_on_a_tcp_bus_no_unit_reads_the_password_of_a_device_that_may_answ
                 reply = await client.write_register(language, 1, device_id=unit)
                 assert reply.isError() and reply.exception_code == 0x01
             assert len(sim.writes) == written
+
+
+@pytest.mark.asyncio
+async def test_a_password_written_through_the_gateway_is_never_logged(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The Nastec's password 1 written by a master (allow_dangerous_writes on): a digit out
+    of range is refused without its reason in the log (it quotes the value tried), and the
+    digits written are logged masked."""
+    caplog.set_level(logging.INFO, "bridge")
+    async with (
+        site(pump={"allow_dangerous_writes": True}, allow_writes=True) as (gateway, sim, engine),
+        master(gateway) as client,
+    ):
+        pump = engine.devices["pump"]
+        await eventually(lambda: pump.health.online and pump.first_poll_done, 10)
+        first = pump.points["password_1_left"].write_address
+        tried = await client.write_registers(first, [8, 6, 4321], device_id=PUMP)
+        assert tried.isError() and tried.exception_code == 0x03
+        written = await client.write_registers(first, [8, 6, 7], device_id=PUMP)
+        assert not written.isError(), written
+        assert words(sim, PUMP, first, 3) == [8, 6, 7]
+    lines = [r.getMessage() for r in caplog.records if r.name == "bridge.gateway"]
+    assert any("'password_1_left': '***'" in line for line in lines), lines
+    assert not [line for line in lines if "4321" in line or "'password_1_left': 8" in line]
 
 
 # --- every refusal of a write, its code ------------------------------------------------------

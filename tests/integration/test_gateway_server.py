@@ -39,11 +39,14 @@ PUMP, STARTER = 1, 3  # units on the line: Nastec (one register per read), soft 
 
 @contextlib.asynccontextmanager
 async def site(
-    starter: dict[str, Any] | None = None, bridge: dict[str, Any] | None = None, **gateway: Any
+    starter: dict[str, Any] | None = None,
+    bridge: dict[str, Any] | None = None,
+    pump: dict[str, Any] | None = None,
+    **gateway: Any,
 ) -> AsyncIterator[tuple[Gateway, Simulator, Engine]]:
     """Two devices polled on one RTU line; the gateway on a free loopback port;
-    ``starter``: more settings of the soft starter's device config; ``bridge``: more of
-    the bridge section."""
+    ``starter``, ``pump``: more settings of their device configs; ``bridge``: more of the
+    bridge section."""
     sim = simulator((PUMP, "nastec_vasco"), (STARTER, "soft_starter"))
     async with serving_serial(sim, baudrate=38400) as path:
         settings = {"enabled": True, "port": 0, "units": {1: "pump", 3: "starter"}} | gateway
@@ -55,7 +58,8 @@ async def site(
                     | {"baudrate": 38400, "timeout": 0.3}
                 ],
                 "devices": [
-                    {"id": "pump", "bus": "line", "unit": PUMP, "mapping": "nastec_vasco"},
+                    {"id": "pump", "bus": "line", "unit": PUMP, "mapping": "nastec_vasco"}
+                    | (pump or {}),
                     {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"}
                     | (starter or {}),
                 ],
