@@ -117,7 +117,7 @@ async def test_a_master_reads_no_password_unless_raw_reads_are_allowed(
             assert beside.registers == words(sim, PUMP, plain.address, 1)
             return
         for (address, count), reply in zip(asked, replies, strict=True):
-            assert not reply.isError(), reply
+            assert not reply.isError(), (address, count, getattr(reply, "exception_code", None))
             assert reply.registers == words(sim, PUMP, address, count)
         assert counters.refused == 0
         assert counters.cached == (3 if max_age else 0)
