@@ -48,7 +48,7 @@ import functools
 import logging
 import time
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bridge import __version__
 from bridge.carry_over import carry_over
@@ -81,6 +81,9 @@ from bridge.standby import check_alone
 from bridge.state_publisher import StatePublisher
 from bridge.subscriptions import Subscriptions, Wanted
 from bridge.web import WebFeed, serve_web
+
+if TYPE_CHECKING:
+    from bridge.gateway import Gateway
 
 log = logging.getLogger(__name__)
 MAX_REQUESTS = 8  # management requests running at a time; more are answered "busy"
@@ -126,6 +129,7 @@ class Bridge:
             error=self._error,
             read=self.state.again,  # a /get: its state, changed or not
         )
+        self.gateway = _gateway(loaded, self.engine, self.dispatcher)  # other Modbus masters
         self._requests = 0  # management requests running
         self._group: asyncio.TaskGroup | None = None
         self._health = HealthReporter()  # rates since the previous report
@@ -147,6 +151,8 @@ class Bridge:
         async with metrics, web, asyncio.TaskGroup() as group:
             self._group = group
             self._engine = group.create_task(self.engine.run(), name="engine")
+            if self.gateway is not None:
+                group.create_task(self.gateway.run(), name="gateway")
             group.create_task(
                 run_with_reconnect(
                     self.mqtt,
@@ -284,6 +290,8 @@ class Bridge:
                 "coalesced": counters.coalesced,
                 "dropped": self.state.dropped,
             }
+            if self.gateway is not None:
+                report["gateway"] = self.gateway.health()
             await client.publish(self.topics.bridge_health, compact(report), retain=True)
             await asyncio.sleep(interval)
 
@@ -385,6 +393,16 @@ class Bridge:
         log.info("%s refused: %s", device_id[:100], payload)
         self.state.queue(Publish(self.topics.error(device_id), payload, retain=False))
         self.feed.refused_command(device_id, payload)
+
+
+def _gateway(loaded: LoadedConfig, engine: Engine, dispatcher: Dispatcher) -> Gateway | None:
+    """The Modbus TCP server for other masters, if enabled (pymodbus' server is imported
+    only then: a bridge without it starts as fast as before)."""
+    if not loaded.config.bridge.gateway.enabled:
+        return None
+    from bridge.gateway import Gateway  # noqa: PLC0415
+
+    return Gateway(loaded, engine, dispatcher)
 
 
 def _metrics(

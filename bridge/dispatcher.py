@@ -29,9 +29,23 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.core.commands import Command, RecentMessages, check_size, parse_get, parse_set
+from bridge.core.codec import Value
+from bridge.core.commands import (
+    Command,
+    RecentMessages,
+    check_size,
+    parse_get,
+    parse_set,
+    past_deadline,
+)
 from bridge.core.topics import Action, CommandTopic
-from bridge.errors import BridgeError, CommandRejectedError, ValueRejectedError
+from bridge.errors import (
+    BridgeError,
+    CommandExpiredError,
+    CommandRejectedError,
+    DeviceTimeoutError,
+    ValueRejectedError,
+)
 from bridge.modbus.engine import Engine
 from bridge.mqtt import Message
 
@@ -153,6 +167,31 @@ class Dispatcher:
                     self._error(device_id, key, value, exc.reason(key))
             except BridgeError as exc:
                 self._fail(command, str(exc))
+
+    async def write_for(
+        self, device_id: str, items: dict[str, object], deadline: float
+    ) -> dict[str, Value]:
+        """A command from another way in (the Modbus TCP gateway, bridge/gateway.py): run
+        in order with the device's /set commands, under the same bound, expiry and offline
+        check, and written all or nothing by the same writer; failures are raised, not
+        published (the caller answers its client)."""
+        waiting = self._waiting.get(device_id, 0)
+        if waiting >= MAX_WAITING:
+            raise CommandExpiredError(f"busy: {waiting} commands already wait for {device_id}")
+        self._waiting[device_id] = waiting + 1
+        try:
+            async with self._locks.setdefault(device_id, asyncio.Lock()):
+                poller = self.engine.device(device_id)
+                if past_deadline(deadline, time.monotonic()):
+                    poller.writes.expired += 1
+                    raise CommandExpiredError("expired: not executed within the command expiry")
+                if poller.health.online is False:
+                    poller.writes.rejected += 1
+                    raise DeviceTimeoutError(f"{device_id} is offline: nothing written")
+                self.counters.commands += 1
+                return await poller.write_many(items, deadline=deadline)
+        finally:
+            self._waiting[device_id] -= 1
 
     def _fail(self, command: Command, reason: str) -> None:
         for key, value in command.items.items():

@@ -6,10 +6,14 @@
     │   └── MappingError        a mapping file; rows name the entity key and the field
     ├── CodecError              a value cannot be decoded or encoded
     │   ├── MissingDataError    a register the value needs has not been read yet
-    │   └── ValueRejectedError  a command value is refused (not writable, type, range,
-    │       │                   enum label, sentinel, guard); nothing is written
+    │   └── ValueRejectedError  a command value is refused (type, range, enum label,
+    │       │                   sentinel); nothing is written. ``forbidden`` is False
+    │       ├── WriteForbiddenError  the key may not be written, whatever the value (not
+    │       │                   writable, unknown, guarded, a lock, its conditions unmet,
+    │       │                   EEPROM or toggle spacing); ``forbidden`` is True
     │       └── CommandRejectedError  keys of a multi-key command were refused; ``refused``
-    │                           maps each to its reason; nothing of the command is written
+    │                           maps each to its reason; nothing of the command is written;
+    │                           ``forbidden`` when any key's refusal was
     ├── CommandExpiredError     a command could not be sent before its expiry: dropped
     └── ModbusError             a transaction did not succeed
         ├── BusError            the port or gateway is not reachable (unplugged, refused)
@@ -29,7 +33,7 @@ what ended them in (nested) ExceptionGroups: ``first_of`` finds the error inside
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TypeVar
 
 _E = TypeVar("_E", bound=BaseException)
@@ -78,12 +82,23 @@ class MissingDataError(CodecError):
 class ValueRejectedError(CodecError):
     """A command value is refused before anything reaches the wire."""
 
+    forbidden = False  # True: the key may not be written whatever the value
+
+
+class WriteForbiddenError(ValueRejectedError):
+    """A command is refused for what it writes, not for its value: an entity that is not
+    writable or unknown, a guarded register, a lock, conditions the device does not meet
+    now, a write sooner than its spacing. The gateway answers 0x01 (the value: 0x03)."""
+
+    forbidden = True
+
 
 class CommandRejectedError(ValueRejectedError):
     """Some keys of a command were refused, so none of its keys is written."""
 
-    def __init__(self, refused: dict[str, str], keys: Sequence[str]) -> None:
-        self.refused = dict(refused)
+    def __init__(self, refused: Mapping[str, ValueRejectedError], keys: Sequence[str]) -> None:
+        self.refused = {key: str(error) for key, error in refused.items()}
+        self.forbidden = any(error.forbidden for error in refused.values())
         self.keys = tuple(keys)
         others = [k for k in self.keys if k not in self.refused]
         reasons = "; ".join(self.refused.values())

@@ -178,23 +178,7 @@ class Management:
         return schedulers[bus_id]
 
     def _reach(self, scheduler: BusScheduler, unit: int) -> Reach:
-        """The configured devices (disabled ones too: they are wired) that may answer
-        ``unit`` on that bus, each with its guard."""
-        bus = scheduler.transport.bus
-        neighbours = []
-        for configured in self.loaded.config.devices:
-            if configured.bus != bus.id:
-                continue
-            poller = self.engine.devices.get(configured.id)
-            if poller is not None:  # its guard holds what earlier mappings guarded too
-                device, guard = poller.device, poller.guard
-            else:
-                device = configured
-                guard = _guard_of(device, self.loaded.mappings[device.id])
-            neighbours.append(
-                Neighbour(device.id, device.unit, guard, device.allow_dangerous_writes)
-            )
-        return reach_of(bus.id, unit, neighbours, tcp=isinstance(bus, TcpBus))
+        return reach_at(self.loaded, self.engine, scheduler.bus_id, unit)
 
     async def _read(self, request: DeviceRead) -> dict[str, Any]:
         scheduler, unit, timeout = self._target(request)
@@ -377,6 +361,25 @@ class Management:
 def _schemas() -> dict[str, Any]:
     """The config and mapping JSON schemas (built once: about 12 ms each)."""
     return {"config_schema": config_schema(), "mapping_schema": mapping_schema()}
+
+
+def reach_at(loaded: LoadedConfig, engine: Engine, bus_id: str, unit: int) -> Reach:
+    """The configured devices (disabled ones too: they are wired) that may answer ``unit``
+    on bus ``bus_id``, each with its guard (bridge/core/reach.py); raw requests and the
+    Modbus TCP gateway (bridge/gateway.py) check their reads and writes against it."""
+    bus = engine.schedulers[bus_id].transport.bus
+    neighbours = []
+    for configured in loaded.config.devices:
+        if configured.bus != bus.id:
+            continue
+        poller = engine.devices.get(configured.id)
+        if poller is not None:  # its guard holds what earlier mappings guarded too
+            device, guard = poller.device, poller.guard
+        else:
+            device = configured
+            guard = _guard_of(device, loaded.mappings[device.id])
+        neighbours.append(Neighbour(device.id, device.unit, guard, device.allow_dangerous_writes))
+    return reach_of(bus.id, unit, neighbours, tcp=isinstance(bus, TcpBus))
 
 
 def _guard_of(device: DeviceConfig, mapping: Mapping) -> Guard:

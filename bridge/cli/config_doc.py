@@ -219,6 +219,13 @@ def _sections(schema: Schema) -> Iterator[Section]:
     yield Section("bridge", "`bridge`", "ManagementConfig", defs["ManagementConfig"])
     yield Section("bridge-metrics", "`bridge.metrics`", "MetricsConfig", defs["MetricsConfig"])
     yield Section("bridge-web", "`bridge.web`", "WebConfig", defs["WebConfig"])
+    yield Section("bridge-gateway", "`bridge.gateway`", "GatewayConfig", defs["GatewayConfig"])
+    yield Section(
+        "bridge-gateway-units",
+        "`bridge.gateway.units` (a bus and unit)",
+        "GatewayUnit",
+        defs["GatewayUnit"],
+    )
     for name, title, anchor in _bus_kinds(schema):
         transports = " or ".join(f"`{t}`" for t in defs[name]["properties"]["transport"]["enum"])
         lead = f"A bus whose `transport` is {transports}."
@@ -321,6 +328,8 @@ _ANCHORS = {
     "ManagementConfig": ("bridge", "bridge"),
     "MetricsConfig": ("bridge.metrics", "bridge-metrics"),
     "WebConfig": ("bridge.web", "bridge-web"),
+    "GatewayConfig": ("bridge.gateway", "bridge-gateway"),
+    "GatewayUnit": ("bridge.gateway.units", "bridge-gateway-units"),
     "SerialLine": ("buses[].serial_behind", "buses-serial-behind"),
     "DeviceConfig": ("devices[]", "devices"),
     "PollConfig": ("devices[].poll", "devices-poll"),

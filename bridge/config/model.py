@@ -117,6 +117,18 @@ class DeviceConfig(Strict):
         None, description="an environment variable holding the device password"
     )
     enabled: bool = True
+    gateway_raw_writes: bool = Field(
+        False,
+        description="let masters of the Modbus TCP server (bridge.gateway, with allow_writes) "
+        "write registers this device's mapping has no writable entity for; guarded "
+        "registers still need allow_dangerous_writes",
+    )
+    gateway_max_age: Duration | None = Field(
+        None,
+        ge=0,
+        description="this device's bridge.gateway.max_age: answer a read from the bridge's "
+        "own image when all of it is younger than this (0: always read the bus)",
+    )
 
     @field_validator("id")
     @classmethod
@@ -203,6 +215,47 @@ class WebConfig(Strict):
         return None if token is None else token.strip()
 
 
+class GatewayUnit(Strict):
+    """A unit on a bus, for a gateway unit no configured device answers."""
+
+    bus: str
+    unit: int = Field(ge=1, le=255)
+
+
+class GatewayConfig(Strict):
+    """The Modbus TCP server other masters read (and, if allowed, write) the buses through
+    (off by default; see the README, Sharing the bus with other Modbus masters)."""
+
+    enabled: bool = False
+    host: str = Field("127.0.0.1", description="address to listen on; 0.0.0.0 for every one")
+    port: int = Field(5020, ge=0, le=65535, description="TCP port (502 needs privileges)")
+    units: dict[Annotated[int, Field(ge=1, le=255)], str | GatewayUnit] = Field(
+        default_factory=dict,
+        description="unit id the server answers -> a configured device id, or {bus, unit}",
+    )
+    max_age: Duration = Field(
+        0.0,
+        ge=0,
+        description="answer a read from the bridge's own image when every register of it "
+        "was read within this many seconds (0: every read goes to the bus)",
+    )
+    allow_writes: bool = Field(
+        False,
+        description="permit FC05/06/15/16; they pass the checks of MQTT commands "
+        "(writable, range, allow_dangerous_writes, EEPROM spacing, password lock)",
+    )
+    max_clients: int = Field(8, ge=1, le=64, description="connections at a time")
+    max_queued_per_client: int = Field(
+        4, ge=1, le=32, description="requests of one connection waiting; more answer 0x06"
+    )
+    max_queued_per_bus: int = Field(
+        8, ge=1, le=64, description="gateway requests waiting per bus; more answer 0x06"
+    )
+    idle_timeout: Duration = Field(
+        120.0, gt=0, description="close a connection silent this long (or a half frame)"
+    )
+
+
 class ManagementConfig(Strict):
     """The ``<base>/bridge/*`` management side: health reports, raw writes, metrics."""
 
@@ -229,6 +282,7 @@ class ManagementConfig(Strict):
     )
     metrics: MetricsConfig = MetricsConfig()
     web: WebConfig = WebConfig()
+    gateway: GatewayConfig = GatewayConfig()
 
 
 class Config(Strict):
@@ -240,6 +294,7 @@ class Config(Strict):
     @model_validator(mode="after")
     def _check_references(self) -> Self:
         errors = reference_errors(self.buses, self.devices)
+        errors += gateway_errors(self.bridge.gateway, self.buses, self.devices)
         if errors:
             raise ValueError("\n".join(errors))
         return self
@@ -280,6 +335,32 @@ def reference_errors(
         if other != device.id:
             errors.append(f"{where}.unit: unit {device.unit} is also {other!r} on {bus.id}")
     return errors + shared_gateway_errors(buses)
+
+
+def gateway_errors(
+    gateway: GatewayConfig, buses: Sequence[SerialBus | TcpBus], devices: Sequence[DeviceConfig]
+) -> list[str]:
+    """The gateway's units name enabled devices or buses that exist; serial units 1..247."""
+    errors: list[str] = []
+    known = {device.id: device for device in devices}
+    lines = {bus.id: bus for bus in buses}
+    if gateway.enabled and not gateway.units:
+        errors.append("bridge.gateway.units: name the units to answer, e.g. {1: pump}")
+    for unit, target in gateway.units.items():
+        where = f"bridge.gateway.units.{unit}"
+        if isinstance(target, str):
+            device = known.get(target)
+            if device is None:
+                errors.append(f"{where}: no device {target!r} (have {sorted(known)})")
+            elif not device.enabled:
+                errors.append(f"{where}: device {target!r} is disabled")
+            continue
+        bus = lines.get(target.bus)
+        if bus is None:
+            errors.append(f"{where}.bus: no bus {target.bus!r} (have {sorted(lines)})")
+        elif bus.transport in ("rtu", "ascii") and target.unit > MAX_SERIAL_UNIT:
+            errors.append(f"{where}.unit: serial lines address units 1..{MAX_SERIAL_UNIT}")
+    return errors
 
 
 def shared_gateway_errors(buses: Iterable[SerialBus | TcpBus]) -> list[str]:

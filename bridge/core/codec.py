@@ -19,7 +19,7 @@ from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
 from bridge.core.entity import DataType, Entity, Order, Table
 from bridge.core.mapping import Point
 from bridge.core.request import Write
-from bridge.errors import MissingDataError, ValueRejectedError
+from bridge.errors import MissingDataError, ValueRejectedError, WriteForbiddenError
 
 Image = AnyMapping[tuple[Table, int], int]
 Value = bool | int | float | str | None
@@ -242,7 +242,7 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
     """The writes that set ``point`` to ``value``; ValueRejectedError if it is not allowed."""
     entity = point.entity
     if not entity.writable:
-        raise ValueRejectedError(f"{point.key} is read-only")
+        raise WriteForbiddenError(f"{point.key} is read-only")
     if point.state_source is not None:
         return _toggle_writes(point, point.state_source, value, image)
     if entity.press is not None:

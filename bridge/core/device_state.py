@@ -67,6 +67,7 @@ class DeviceState:
         self.guard = guard | own
         self.timing = timing
         self.image: dict[Address, int] = {}
+        self.read_at: dict[Address, float] = {}  # when each word of the image was read or written
         self.values: dict[str, Value] = {}
         self.counters = counters_of(self.points.values(), confirm)
         self.counter_news: list[tuple[str, Reading]] = []  # held, wrapped, reset readings
@@ -128,6 +129,12 @@ class DeviceState:
     def store(self, write: Write) -> None:
         """What the device acknowledged writing goes in the image."""
         self.image.update(stored(write))
+
+    def stamp(self, cells: Iterable[Address], now: float) -> None:
+        """The words of ``cells`` in the image are as the device held them at ``now``
+        (monotonic): read or acknowledged written then."""
+        for cell in cells:
+            self.read_at[cell] = now
 
     def decode_fresh(self, keys: Iterable[str], fresh: set[Address]) -> frozenset[str]:
         """Decode the readable ``keys`` whose registers are all in ``fresh`` (refused ones

@@ -120,6 +120,7 @@ class DeviceLink:
         """A read's answer into the image; addresses refused before and answered now are
         read again (the plans are made again)."""
         back = self.state.keep(read, values, fresh)
+        self.state.stamp(((read.table, a) for a in read.span), time.monotonic())
         if back:
             log.info("%s answers %s again; read again", self.device.id, self.state.shown(back))
 

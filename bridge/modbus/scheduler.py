@@ -73,7 +73,8 @@ class Priority(IntEnum):
     WRITE = 0  # commands, and the reads that are part of one (read-modify-write, read-back)
     KEEPALIVE = 1  # a device's communication watchdog must hear from the bridge in time
     READ_NOW = 2  # reads on request (/get, management reads)
-    POLL = 3
+    PROXY = 3  # requests of other masters through the Modbus TCP server (bridge/gateway.py)
+    POLL = 4
 
 
 @dataclass(slots=True)

@@ -32,6 +32,7 @@ from bridge.errors import (
     ModbusError,
     PartialWriteError,
     ValueRejectedError,
+    WriteForbiddenError,
 )
 from bridge.modbus.device_link import Changes, Link
 from bridge.modbus.scheduler import Priority
@@ -126,6 +127,7 @@ class DeviceWriter:
             raise
         for write in writes:
             self.state.store(write)
+            self.state.stamp(stored(write), time.monotonic())
         self.counters.done += len(plan)  # per key, like skipped_unchanged
         written = [p for p in points if p.key in plan]
         for point in written:
@@ -147,15 +149,15 @@ class DeviceWriter:
     def _allowed(self, items: dict[str, object]) -> list[Point]:
         """The points of a command, each known, writable and not guarded; else nothing."""
         points: list[Point] = []
-        refused: dict[str, str] = {}
+        refused: dict[str, ValueRejectedError] = {}
         for key in items:
             point = self.state.points.get(key)
             try:
                 if point is None:
-                    raise ValueRejectedError(f"{key}: no such entity on {self.link.device.id}")
+                    raise WriteForbiddenError(f"{key}: no such entity on {self.link.device.id}")
                 self._check_allowed(point)
             except ValueRejectedError as exc:
-                refused[key] = str(exc)
+                refused[key] = exc
                 continue
             points.append(point)
         if refused:
@@ -170,7 +172,7 @@ class DeviceWriter:
         out. CommandRejectedError naming every refused key."""
         after: dict[Address, int] = dict(self.state.image)
         plan: dict[str, tuple[Write, ...]] = {}
-        refused: dict[str, str] = {}
+        refused: dict[str, ValueRejectedError] = {}
         for point in points:
             entity = point.entity
             try:
@@ -185,7 +187,7 @@ class DeviceWriter:
                     self._check_eeprom_rate(point)
                 self._check_write_interval(point)
             except ValueRejectedError as exc:
-                refused[point.key] = str(exc)
+                refused[point.key] = exc
                 continue
             plan[point.key] = writes
             for write in writes:
@@ -201,14 +203,14 @@ class DeviceWriter:
     def _check_requirements(self, points: list[Point]) -> None:
         """Every key whose ``requires`` do not hold now (read fresh) is refused with the
         reason; one refused key refuses the command."""
-        refused: dict[str, str] = {}
+        refused: dict[str, ValueRejectedError] = {}
         for point in points:
             for required in self._required(point):
                 wanted = point.entity.requires[required.key]
                 allowed = wanted if isinstance(wanted, list) else [wanted]
                 value = decode(required, self.state.image)
                 if value not in allowed:
-                    refused[point.key] = (
+                    refused[point.key] = WriteForbiddenError(
                         f"{point.key} refused: {required.entity.name} ({required.key}) reads "
                         f"{_word(value)}, needs {' or '.join(_word(v) for v in allowed)}: the "
                         "device does not accept this command now"
@@ -225,7 +227,7 @@ class DeviceWriter:
             return
         waited = time.monotonic() - last
         if waited < interval:
-            raise ValueRejectedError(
+            raise WriteForbiddenError(
                 f"{point.key} was sent {waited:.1f} s ago: not again within {interval:g} s "
                 "(the device may still be acting on it)"
             )
@@ -282,7 +284,7 @@ class DeviceWriter:
     def _check_allowed(self, point: Point) -> None:
         entity = point.entity
         if not entity.writable:
-            raise ValueRejectedError(f"{point.key} is read-only")
+            raise WriteForbiddenError(f"{point.key} is read-only")
         if entity.dangerous and not self.link.device.allow_dangerous_writes:
             raise self._guarded(point.key)
         protocol, device = self.state.protocol, self.link.device
@@ -292,7 +294,7 @@ class DeviceWriter:
         if point.table is Table.HOLDING and point.write_address == to_wire(
             unlock.lock, protocol.addressing
         ):
-            raise ValueRejectedError(
+            raise WriteForbiddenError(
                 f"{point.key} would lock {device.id}, and the bridge unlocks it again on its "
                 "next request with the password in its config: to keep it locked, remove "
                 f"devices.{device.id}.password (or password_file, password_env) first"
@@ -316,8 +318,8 @@ class DeviceWriter:
                 raise self._guarded(point.key + below)
             image |= stored(w)
 
-    def _guarded(self, subject: str) -> ValueRejectedError:
-        return ValueRejectedError(
+    def _guarded(self, subject: str) -> WriteForbiddenError:
+        return WriteForbiddenError(
             f"{subject} is a guarded write (dangerous); set allow_dangerous_writes: true "
             f"for device {self.link.device.id} to permit it"
         )
@@ -328,7 +330,7 @@ class DeviceWriter:
         wait = self.state.protocol.eeprom_write_interval
         if last is not None and time.monotonic() - last < wait:
             left = wait - (time.monotonic() - last)
-            raise ValueRejectedError(
+            raise WriteForbiddenError(
                 f"{point.key} is stored in EEPROM: next write allowed in {left:.0f} s"
             )
 
@@ -362,8 +364,8 @@ def _check_conditions_alone(points: list[Point]) -> None:
     change (a mode written with the start it conditions)."""
     if len(points) < 2:
         return
-    refused = {
-        p.key: (
+    refused: dict[str, ValueRejectedError] = {
+        p.key: WriteForbiddenError(
             f"{p.key} has conditions ({', '.join(p.entity.requires)}) checked against the "
             "device as read before the command: send it in a command of its own"
         )

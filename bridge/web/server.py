@@ -31,7 +31,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from bridge import __version__
 from bridge.config import LoadedConfig
@@ -55,6 +55,9 @@ STATIC = {
 }
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
+if TYPE_CHECKING:
+    from bridge.gateway import Gateway
+
 log = logging.getLogger(__name__)
 
 
@@ -85,6 +88,8 @@ class BridgeState(Protocol):
     def topics(self) -> Topics: ...
     @property
     def feed(self) -> WebFeed: ...
+    @property
+    def gateway(self) -> Gateway | None: ...
     @property
     def mqtt_state(self) -> str: ...
     @property
@@ -197,6 +202,7 @@ class WebApp:
             subscriptions=bridge.mqtt_subscriptions,
             raw_writes=bridge.loaded.config.bridge.allow_raw_writes,
             refused=bridge.feed.refused,
+            gateway=bridge.gateway.health() if bridge.gateway is not None else None,
         )
 
     def device(self, device_id: str) -> dict[str, Any] | None:

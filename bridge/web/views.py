@@ -2,7 +2,7 @@
 topics use: ``engine.snapshot()`` through ``build_health_report``, each poller's values
 through ``bridge.core.state``. Nothing here touches a bus or waits.
 
-    overview   {version, time, uptime_s, mqtt, subscriptions, raw_writes, refused,
+    overview   {version, time, uptime_s, mqtt, subscriptions, raw_writes, refused, gateway,
                 devices: [summary],
                 buses: [{id, transport, connected, utilisation, requests_per_s, requests,
                          timeouts, frame_errors, exceptions, reopenings}]}

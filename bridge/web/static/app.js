@@ -148,8 +148,24 @@ function renderOverview(overview) {
        el("td", b.exceptions, "num"), el("td", b.reopenings, "num")],
       { "data-bus": b.id },
     )), "data-bus");
+  renderGateway(overview.gateway);
   fillSelects(overview);
   if (page.device) renderFacts(overview.devices.find((d) => d.id === page.device.id));
+}
+
+function renderGateway(gateway) {
+  $("#gateway-state").textContent = gateway
+    ? `Listening on port ${gateway.port}; bus transactions for other masters: ` +
+      (Object.entries(gateway.bus_transactions).map(([bus, n]) => `${bus} ${n}`).join(", ") || "none")
+    : "The Modbus TCP server is off (bridge.gateway).";
+  const clients = gateway ? Object.entries(gateway.clients) : [];
+  syncBody($("#gateway tbody"),
+    clients.map(([peer, c]) => row(
+      [el("th", peer), el("td", c.connections, "num"), el("td", c.requests, "num"),
+       el("td", c.served, "num"), el("td", c.cached, "num"), el("td", c.queued, "num"),
+       el("td", c.refused, "num"), el("td", c.failed, "num"), el("td", c.dropped, "num")],
+      { "data-client": peer },
+    )), "data-client");
 }
 
 function fillSelects(overview) {

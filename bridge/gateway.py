@@ -1,0 +1,452 @@
+"""The gateway: other Modbus masters read and write the bridge's buses through its Modbus
+TCP server (bridge/modbus/gateway_server.py), between the bridge's own polls.
+
+``Gateway.answer(client, request)`` decides every request (the pure rules are
+bridge/core/gateway.py):
+
+- its unit must be in ``bridge.gateway.units`` (else 0x0A); a configured device that is
+  offline answers 0x0B at once, without a frame (the poller brings it back);
+- a read goes through the bus scheduler at ``Priority.PROXY`` (after commands and reads
+  on request, before routine polls), split into the device's read limits and joined as
+  ``device/read`` does; with ``max_age`` (the server's, or the device's
+  ``gateway_max_age``) a read whose words the bridge read or wrote within that age is
+  answered from its image without a frame. What a proxied read returns goes into the
+  device's image too.
+- a write needs ``allow_writes`` (else 0x01) and a configured device. The words are turned
+  into the values of the entities they write (every word of each entity, else 0x03) and
+  run as one MQTT command would (``Dispatcher.write_for``: after the device's waiting
+  commands, the offline check and the command expiry; then the writer's checks: writable,
+  type, range, enum, the dangerous-write guard, EEPROM spacing, a password lock), read
+  back and published; words that mean no value the entity is set to by exactly those
+  words (a NaN, a sentinel, an enum code without a label) answer 0x03. Words no writable
+  entity covers are refused (0x01) unless the device sets ``gateway_raw_writes``; then
+  they go raw under the rule of raw writes (bridge/core/reach.py ``check_raw_write``: the
+  guard of every device that may answer the unit, ``allow_dangerous_writes``), never to
+  the register that locks a device whose password the bridge holds, and never together
+  with an entity's words (0x01). A refusal never reaches the bus.
+- a read of a secret or write-only register (a password) of any device that may answer
+  the unit answers 0x02 (illegal data address: what a device answers for an address it
+  does not serve), from the bus and from the image alike, unless
+  ``bridge.allow_raw_writes`` permits raw reads of them (the rule of raw reads,
+  ``check_raw_read``).
+- at most ``max_queued_per_bus`` gateway requests wait per bus; more answer 0x06.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from collections import Counter
+from collections.abc import AsyncIterator, Iterable
+from typing import Any
+
+from bridge.config import GatewayConfig, LoadedConfig, TcpBus
+from bridge.core.address import to_wire
+from bridge.core.codec import COMMAND_PRESS, Value, decode, encode
+from bridge.core.entity import Table
+from bridge.core.gateway import (
+    MAX_READ_BITS,
+    MAX_READ_REGISTERS,
+    ClientBook,
+    ClientCounters,
+    Code,
+    ProxyRequest,
+    Route,
+    cached_words,
+    check_request,
+    code_for,
+)
+from bridge.core.management_request import RequestError
+from bridge.core.mapping import Point
+from bridge.core.reach import check_raw_read, check_raw_write
+from bridge.core.request import Read, Write
+from bridge.dispatcher import Dispatcher
+from bridge.errors import BridgeError, ValueRejectedError
+from bridge.management import reach_at
+from bridge.modbus.commission import Submit, read_in_parts, scheduler_submit
+from bridge.modbus.engine import Engine
+from bridge.modbus.gateway_server import GatewayServer, Limits
+from bridge.modbus.poller import DevicePoller
+from bridge.modbus.scheduler import Priority
+
+log = logging.getLogger(__name__)
+Cell = tuple[Table, int]
+MASKED = "***"  # what the log shows for the value of a secret register
+
+
+class GatewayRefusalError(BridgeError):
+    """A request the gateway refuses itself, with the exception code it answers."""
+
+    def __init__(self, code: Code, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+
+
+class Gateway:
+    """Answers the requests of other masters for one bridge."""
+
+    def __init__(self, loaded: LoadedConfig, engine: Engine, dispatcher: Dispatcher) -> None:
+        self.loaded = loaded
+        self.settings: GatewayConfig = loaded.config.bridge.gateway
+        self.engine = engine
+        self.dispatcher = dispatcher
+        self.expiry = loaded.config.mqtt.command_expiry
+        self.book = ClientBook()
+        self.routes = routes_of(loaded)
+        self.waiting: Counter[str] = Counter()  # gateway requests waiting or running, per bus
+        self.transactions: Counter[str] = Counter()  # bus transactions they took, per bus
+        self.server = GatewayServer(
+            self.settings.host,
+            self.settings.port,
+            self.answer,
+            Limits(
+                self.settings.max_clients,
+                self.settings.max_queued_per_client,
+                self.settings.idle_timeout,
+            ),
+            self.book,
+        )
+
+    async def run(self) -> None:
+        """Serve until cancelled (nothing when the gateway is off)."""
+        if self.settings.enabled:
+            await self.server.run()
+
+    async def answer(self, client: ClientCounters, request: ProxyRequest) -> tuple[int, ...] | int:
+        """The values (a write: those written) or the exception code; never raises."""
+        try:
+            code = check_request(request)
+            if code is not None:
+                raise GatewayRefusalError(
+                    code, f"FC{request.function:02d} {request.address}+{request.count}"
+                )
+            route = self.routes.get(request.unit)
+            if route is None:
+                raise GatewayRefusalError(
+                    Code.PATH_UNAVAILABLE, f"unit {request.unit} is not served"
+                )
+            if request.is_write:
+                values = await self._write(route, request)
+            else:
+                read = request.read()
+                self._check_read(route, read)
+                values = await self._read(client, route, read)
+        except GatewayRefusalError as refusal:
+            client.refused += 1
+            if request.is_write:
+                self._refused(request, refusal)
+            return int(refusal.code)
+        except ValueRejectedError as rejected:  # the writer's checks: nothing was sent
+            client.refused += 1
+            self._refused(request, rejected)
+            return code_for(rejected)
+        except BridgeError as error:
+            client.failed += 1
+            return code_for(error)
+        client.served += 1
+        return values
+
+    # --- reads ---------------------------------------------------------------------------
+
+    def _check_read(self, route: Route, read: Read) -> None:
+        """0x02 for a read of a secret or write-only cell of any device that may answer the
+        route's unit, from the bus or the image alike, unless ``bridge.allow_raw_writes``
+        (the rule of raw reads: bridge/core/reach.py)."""
+        reach = reach_at(self.loaded, self.engine, route.bus, route.unit)
+        allowed = self.loaded.config.bridge.allow_raw_writes
+        try:
+            check_raw_read(reach, read, secrets_allowed=allowed)
+        except RequestError as hidden:
+            raise GatewayRefusalError(Code.ILLEGAL_ADDRESS, str(hidden)) from None
+
+    async def _read(self, client: ClientCounters, route: Route, read: Read) -> tuple[int, ...]:
+        poller = self._device(route)
+        scheduler = self.engine.schedulers[route.bus]
+        if poller is None:
+            limit = MAX_READ_BITS if read.table.is_bits else MAX_READ_REGISTERS
+            submit = scheduler_submit(scheduler, Priority.PROXY)
+            timeout = scheduler.transport.bus.timeout
+        else:
+            state = poller.state
+            max_age = poller.device.gateway_max_age
+            age = self.settings.max_age if max_age is None else max_age
+            cached = cached_words(read, state.image, state.read_at, time.monotonic(), age)
+            if cached is not None:
+                client.cached += 1
+                return cached
+            limit = state.limits().max_count(read.table)
+            submit = _device_submit(poller)
+            timeout = poller.link.timeout
+        async with self._slot(route.bus):
+            values, requests, _ = await read_in_parts(submit, route.unit, read, timeout, limit)
+        self.transactions[route.bus] += requests
+        if poller is not None:
+            poller.link.keep(read, values, set())
+        return values
+
+    # --- writes --------------------------------------------------------------------------
+
+    async def _write(self, route: Route, request: ProxyRequest) -> tuple[int, ...]:
+        if not self.settings.allow_writes:
+            raise GatewayRefusalError(
+                Code.ILLEGAL_FUNCTION, "writes are off (bridge.gateway.allow_writes)"
+            )
+        poller = self._device(route)
+        if poller is None:
+            raise GatewayRefusalError(
+                Code.ILLEGAL_FUNCTION, f"unit {request.unit}: writes go to configured devices only"
+            )
+        items = items_of(poller, request)
+        deadline = time.monotonic() + self.expiry
+        device_id = poller.device.id
+        async with self._slot(route.bus):
+            if items is None:
+                write = self._raw(poller, request)
+                await poller.link.submit(write, Priority.WRITE, deadline=deadline)
+                poller.state.store(write)
+                shown = MASKED if _hidden(poller, request) else write
+                log.info("gateway: %s: raw %s written", device_id, shown)
+            else:
+                done = await self.dispatcher.write_for(device_id, items, deadline)
+                secret = {k for k in done if poller.points[k].entity.secret}
+                log.info(
+                    "gateway: %s: %s written",
+                    device_id,
+                    {k: MASKED if k in secret else v for k, v in done.items()},
+                )
+        self.transactions[route.bus] += 1
+        return request.values
+
+    def _raw(self, poller: DevicePoller, request: ProxyRequest) -> Write:
+        """A write of words no entity covers, where the device allows it, unguarded."""
+        device = poller.device
+        if not device.gateway_raw_writes:
+            raise GatewayRefusalError(
+                Code.ILLEGAL_FUNCTION,
+                f"{device.id}: {request.table.value} {request.address}+{request.count} is "
+                "not mapped as writable; set gateway_raw_writes: true for the device to permit it",
+            )
+        write = request.write(poller.protocol.coil_on_value)
+        unlock = poller.protocol.unlock
+        if unlock is not None and unlock.lock is not None and device.has_password:
+            lock = to_wire(unlock.lock, poller.protocol.addressing)
+            if write.table is Table.HOLDING and lock in range(
+                write.address, write.address + request.count
+            ):
+                raise GatewayRefusalError(
+                    Code.ILLEGAL_FUNCTION,
+                    f"{device.id}: register {lock} locks the device, which the bridge unlocks "
+                    "again with the password in its config",
+                )
+        bus = self.engine.schedulers[device.bus].transport.bus
+        raw_units = bus.raw_units if isinstance(bus, TcpBus) else ()
+        reach = reach_at(self.loaded, self.engine, device.bus, device.unit)
+        try:  # the rule of raw writes: every device that may answer the unit, its guard
+            check_raw_write(reach, write, raw_units)
+        except RequestError as refused:
+            raise GatewayRefusalError(Code.ILLEGAL_FUNCTION, str(refused)) from None
+        return write
+
+    # --- shared --------------------------------------------------------------------------
+
+    def _refused(self, request: ProxyRequest, refusal: BridgeError) -> None:
+        """Log a refused write; without its reason when it writes a secret register (the
+        reason may quote the value: a password tried)."""
+        route = self.routes.get(request.unit)
+        poller = self._device(route) if route is not None else None
+        reason = str(refusal)
+        if poller is not None and _hidden(poller, request):
+            reason = "a write of secret registers (the reason may quote the value: not logged)"
+        log.info("gateway: unit %d: write refused: %s", request.unit, reason)
+
+    def _device(self, route: Route) -> DevicePoller | None:
+        return self.engine.devices.get(route.device) if route.device is not None else None
+
+    @contextlib.asynccontextmanager
+    async def _slot(self, bus: str) -> AsyncIterator[None]:
+        if self.waiting[bus] >= self.settings.max_queued_per_bus:
+            raise GatewayRefusalError(
+                Code.BUSY, f"{self.waiting[bus]} gateway requests wait for bus {bus}"
+            )
+        self.waiting[bus] += 1
+        try:
+            yield
+        finally:
+            self.waiting[bus] -= 1
+
+    def health(self) -> dict[str, Any]:
+        """The gateway's part of ``<base>/bridge/health``."""
+        return {
+            "enabled": self.settings.enabled,
+            "port": self.server.port,
+            "clients": {peer: c.as_dict() for peer, c in self.book.clients.items()},
+            "total": self.book.totals().as_dict(),
+            "bus_transactions": dict(self.transactions),
+        }
+
+
+def _hidden(poller: DevicePoller, request: ProxyRequest) -> bool:
+    """The request writes a secret or write-only register of the device (a password)."""
+    return bool(poller.guard.hidden_in(request.table, request.address, request.count))
+
+
+def routes_of(loaded: LoadedConfig) -> dict[int, Route]:
+    """Every gateway unit with its bus, unit and configured device (if any)."""
+    config = loaded.config
+    devices = {d.id: d for d in config.devices}
+    routes: dict[int, Route] = {}
+    for unit, target in config.bridge.gateway.units.items():
+        if isinstance(target, str):
+            device = devices[target]
+            routes[unit] = Route(device.bus, device.unit, device.id)
+            continue
+        there = next(
+            (
+                d.id
+                for d in config.devices
+                if d.enabled and (d.bus, d.unit) == (target.bus, target.unit)
+            ),
+            None,
+        )
+        routes[unit] = Route(target.bus, target.unit, there)
+    return routes
+
+
+def _device_submit(poller: DevicePoller) -> Submit:
+    """Reads through the device's link (its unlock, its health), after commands."""
+
+    async def submit(unit: int, request: Read | Write, timeout: float) -> tuple[int, ...]:
+        del unit, timeout  # the device's own
+        if poller.health.online is False:
+            raise GatewayRefusalError(Code.TARGET_NO_RESPONSE, f"{poller.device.id} is offline")
+        return await poller.link.submit(request, Priority.PROXY)
+
+    return submit
+
+
+def items_of(poller: DevicePoller, request: ProxyRequest) -> dict[str, object] | None:
+    """The command a write of words amounts to: each writable entity whose words it writes,
+    with the value those words mean; None when no word is a writable entity's (a raw write).
+    GatewayRefusalError: 0x03 for an entity written in part, a command word no button
+    sends, words that mean no value (``_value``); 0x01 for a toggle or pulse, and for
+    entities written with words no entity covers (raw, they would skip the checks)."""
+    table = request.table
+    cells: dict[Cell, int] = {(table, request.address + i): v for i, v in enumerate(request.values)}
+    items: dict[str, object] = {}
+    covered: set[Cell] = set()
+    buttons: set[Cell] = set()
+    for point in poller.points.values():
+        entity = point.entity
+        space = Table.COIL if point.table is Table.COIL else Table.HOLDING
+        if not entity.writable or space is not table:
+            continue
+        mine = [(space, point.write_address + i) for i in range(point.count)]
+        hit = [c for c in mine if c in cells]
+        if not hit:
+            continue
+        if len(hit) != len(mine):
+            raise GatewayRefusalError(
+                Code.ILLEGAL_VALUE, f"{point.key}: write its {len(mine)} registers at once"
+            )
+        if point.state_source is not None or entity.pulse:
+            raise GatewayRefusalError(
+                Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
+            )
+        words = tuple(cells[c] for c in mine)
+        if entity.press is not None:
+            buttons |= set(mine)
+            if _presses(point, words, poller.state.image):
+                items[point.key] = COMMAND_PRESS
+                covered |= set(mine)
+            continue
+        items[point.key] = _value(point, words, poller.state.image)
+        covered |= set(mine)
+    missing = set(cells) - covered
+    if missing & buttons:
+        raise GatewayRefusalError(
+            Code.ILLEGAL_VALUE, "no command of this register writes that word"
+        )
+    _check_kept_bits(poller.points.values(), cells, covered, poller.state.image)
+    if missing and covered:  # raw, they would skip the entities' checks (range, spacing)
+        raise GatewayRefusalError(
+            Code.ILLEGAL_FUNCTION,
+            f"{', '.join(items)} written with registers no writable entity covers: write "
+            "them on their own",
+        )
+    return None if missing else items
+
+
+def _check_kept_bits(
+    points: Iterable[Point], cells: dict[Cell, int], covered: set[Cell], image: dict[Cell, int]
+) -> None:
+    """A register whose writable entities are bit fields: the writer writes their bits
+    and keeps the device's others. 0x03 unless the master sent those others as the bridge
+    last read them, so a write never answers success for bits that were not written."""
+    masks: dict[Cell, int] = {}
+    for point in points:
+        entity = point.entity
+        if not entity.writable or point.table.is_bits:
+            continue
+        width = entity.field_width
+        mask = 0xFFFF if width is None else ((1 << width) - 1) << (entity.bit or 0)
+        for offset in range(point.count):
+            cell = (Table.HOLDING, point.write_address + offset)
+            if cell in covered:
+                masks[cell] = masks.get(cell, 0) | mask
+    for cell, mask in masks.items():
+        kept = ~mask & 0xFFFF
+        held = image.get(cell)
+        if kept and (held is None or (cells[cell] ^ held) & kept):
+            shown = "not read yet" if held is None else f"{held & kept:#06x}"
+            raise GatewayRefusalError(
+                Code.ILLEGAL_VALUE,
+                f"register {cell[1]}: bits {kept:#06x} are no entity's; the device keeps "
+                f"them ({shown}): send them as it holds them",
+            )
+
+
+def _presses(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> bool:
+    try:
+        writes = encode(point, COMMAND_PRESS, image)
+    except BridgeError:
+        return False
+    return len(writes) == 1 and writes[0].values == words
+
+
+def _value(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> Value:
+    """What ``words`` written at the entity's write address mean, read as the entity.
+
+    GatewayRefusalError (0x03) unless they mean a value the entity is set to by exactly
+    these words: never a sentinel or a NaN (no value), an enum code without a label, a
+    register the value needs that was not read yet, or words the bridge would write
+    otherwise (7 to an on/off register, digits beyond the entity's precision). Nothing of
+    the request is written then."""
+    seen = dict(image)
+    for offset, word in enumerate(words):
+        seen[(point.table, point.address + offset)] = word
+    try:
+        value = decode(point, seen)
+        writes = encode(point, value, seen)
+    except BridgeError as error:
+        raise GatewayRefusalError(
+            Code.ILLEGAL_VALUE, f"{point.key}: {list(words)} is no value it takes ({error})"
+        ) from None
+    written = {cell: word for w in writes for cell, word in _cells_of(w).items()}
+    space = Table.COIL if point.table is Table.COIL else Table.HOLDING
+    wanted = {(space, point.write_address + i): word for i, word in enumerate(words)}
+    if written != wanted:
+        raise GatewayRefusalError(
+            Code.ILLEGAL_VALUE,
+            f"{point.key}: {list(words)} reads as {value!r}, which the bridge writes as "
+            f"{sorted(written.values())}",
+        )
+    return value
+
+
+def _cells_of(write: Write) -> dict[Cell, int]:
+    """The cells a write sets, coils as 0/1 (FC05 sends its ON word)."""
+    values = write.values
+    if write.function == 5:
+        values = (1 if values[0] else 0,)
+    return {(write.table, write.address + i): v for i, v in enumerate(values)}
