@@ -382,9 +382,11 @@ class MqttClient:
         """The retained messages under ``topic_filter`` now (topic -> payload), only those
         whose topic ``keep`` accepts if given (the others are not held in memory).
 
-        Subscribes, collects until no retained message came for ``settle`` seconds (or
-        ``limit`` were kept: 1 for a single topic, whose message comes at once), then
-        unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
+        Subscribes (at QoS 0: a retained message is read once, nothing to redeliver; on
+        NATS a QoS 1 subscription is a JetStream consumer, which a cluster creates slowly
+        after a node failure), collects until no retained message came for ``settle``
+        seconds (or ``limit`` were kept: 1 for a single topic, whose message comes at once),
+        then unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
         keep flowing to ``messages()`` meanwhile.
         """
         connection = self._require()
@@ -393,7 +395,7 @@ class MqttClient:
         queue: asyncio.Queue[Received] = asyncio.Queue()
         connection.collectors[topic_filter] = queue
         try:
-            await self.subscribe(topic_filter)
+            await self.subscribe(topic_filter, qos=0)
             while True:
                 try:  # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancel
                     async with asyncio.timeout(settle):
@@ -417,7 +419,8 @@ class MqttClient:
     @contextlib.asynccontextmanager
     async def watching(self, topic: str) -> AsyncIterator[Callable[[], Awaitable[Message]]]:
         """Every message on ``topic`` (one topic, no wildcard), retained or live, for the
-        block's ``next()`` alone: ``messages()`` does not see them, nor they its own."""
+        block's ``next()`` alone: ``messages()`` does not see them, nor they its own
+        (subscribed at QoS 0, as ``retained``)."""
         connection = self._require()
         queue: asyncio.Queue[Received] = asyncio.Queue()
         connection.watchers[topic] = queue
@@ -426,7 +429,7 @@ class MqttClient:
             return _message(await queue.get())
 
         try:
-            await self.subscribe(topic)
+            await self.subscribe(topic, qos=0)
             yield following
             await self._unsubscribe(connection, topic)
         finally:
