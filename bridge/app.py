@@ -242,6 +242,8 @@ class Bridge:
                 await serving
         except ExceptionGroup as failed:  # the MQTT error, so the reconnect loop sees it
             raise first_of(failed, MqttError) or failed from None
+        finally:
+            self.subscriptions.reset()  # nothing is held between sessions
 
     async def _serve(self, client: MqttClient) -> None:
         """Handle every message of the session; a rival's ``bridge/info`` ends it."""

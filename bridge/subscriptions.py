@@ -49,7 +49,7 @@ class Subscriptions:
         self.reset()
 
     def reset(self) -> None:
-        """A new session: nothing is held yet."""
+        """A new session, or none: nothing is held."""
         self.states = {w.name: "pending" for w in self.wanted}
 
     async def keep(self, client: MqttClient, wanted: Wanted) -> None:
