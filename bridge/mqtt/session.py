@@ -7,7 +7,8 @@ takes the connection but never answers an MQTT 5 CONNECT, as amqtt does, then pu
 checks). Leaving cleanly (the session returned or was cancelled: a stop) publishes the
 caller's ``farewell`` messages (retained: devices going offline, or empty payloads that
 remove what the session published, ``retained_topics``), then ``goodbye`` on the will
-topic (``offline``; empty removes it), all at once, and disconnects once the broker
+topic (``offline``; empty removes it), all at once (also when the session published
+retained messages before its ``online``), and disconnects once the broker
 acknowledged them all; if it did not within ``FAREWELL_TIMEOUT`` seconds, the socket is
 closed without DISCONNECT, so the broker publishes the will. Incoming messages are
 ``Message`` values, decoupled from paho. The caller owns the reconnect loop
@@ -199,7 +200,9 @@ class MqttClient:
         if connection is None:
             return
         taken = exc_type is not None and issubclass(exc_type, BaseTopicTakenError)
-        if taken or not self.announced:  # the will topic is another bridge's, or not said
+        # ``online`` said, or a state published before it (a stop takes that back too)
+        said = self.announced or bool(self.retained_topics)
+        if taken or not said:  # the will topic is another bridge's, or nothing was said
             self.announced = False
             await self._leave_quietly(connection)
             return
