@@ -2,9 +2,10 @@
 
 ``Bridge(loaded).run()`` runs one TaskGroup: the engine (every bus and device) and the
 MQTT session, which reconnects by itself (bridge/mqtt/reconnect.py). Every (re)connect
-subscribes to the command topics, clears retained discovery configs the bridge no longer
-produces, publishes discovery and the whole state. Commands go through the dispatcher
-(bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
+subscribes to the command topics (at QoS 0), publishes the whole state, then ``online``
+and discovery (the first one of a run also clears retained discovery configs the bridge no
+longer produces), and serves commands from the base-topic check on. Commands go through
+the dispatcher (bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
 anything refused or failing goes to ``<base>/<device>/error``. Handling one message never
 waits for a device or a broker round trip, and no exception from one message leaves the
 message loop. At most ``MAX_REQUESTS`` management requests run at a time. A subscription
@@ -18,8 +19,9 @@ message it published. One bridge per base topic: before a connection says ``onli
 ``check_alone`` (bridge/standby.py) checks that no other live bridge serves the topic
 (else this one stands by without polling: bridge/core/instance.py), and a bridge that
 comes up beside this one later is told apart by the ``bridge/info`` it publishes. Before
-its first state, a session reads the device documents it left retained, so counters
-and alarm events carry on across a restart (bridge/carry_over.py).
+its first state, the first session of a run (and the first after standing by) reads the
+device documents left retained, so counters and alarm events carry on across a restart
+(bridge/carry_over.py).
 
 The wiring: the parts call back into the bridge, and every callback is named in
 ``__init__`` and ``run``:
