@@ -360,10 +360,19 @@ class Bridge:
 
     def _spawn(self, work: Any, failed: Callable[[str], None] | None = None) -> None:
         """Run a command's or request's work in the bridge's TaskGroup; whatever it raises
-        is logged (and reported through ``failed``), never taken for the bridge's end."""
+        is logged (and reported through ``failed``), never taken for the bridge's end. Once
+        the bridge is stopping it is not started (a publish acknowledged during the stop
+        asked for one: the stop ended with a RuntimeError)."""
         if self._group is None:
             raise RuntimeError("the bridge is not running")
-        self._group.create_task(_guarded(work, failed))
+        guarded = _guarded(work, failed)
+        try:
+            self._group.create_task(guarded)
+        except RuntimeError:  # the bridge is stopping: its TaskGroup takes no new task
+            guarded.close()
+            if asyncio.iscoroutine(work):
+                work.close()
+            log.debug("the bridge is stopping: work not started")
 
     # --- management -------------------------------------------------------------------
 
