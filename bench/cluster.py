@@ -10,10 +10,15 @@ off, from the kill:
 * **detected**: the bridge saw its connection end;
 * **connected**: its CONNACK came (the failed attempts before it are counted: a node that
   takes the connection and does not answer the CONNECT while JetStream elects leaders);
-* **online**: its ``online`` was acknowledged (after the base-topic check, at most 1.5 s);
-* **first value**: its state reached a subscriber (QoS 0) on a node that stayed up;
-* **live**: its command subscription was acknowledged (SUBACK) again;
-* **lost**: commands the broker acknowledged after ``live`` that never reached the drive.
+* **online**: its ``online`` was acknowledged (after the base-topic check, at most 1.5 s,
+  and, since issue 28, after its state);
+* **first value**: its state reached a subscriber (QoS 0) on a node that stayed up (the
+  first message on its state topic after the loss);
+* **live**: online, with its command subscription acknowledged (SUBACK) again;
+* **lost**: commands the broker took after ``live`` (QoS 0, alternating with QoS 1 ones
+  it acknowledged) that never reached the drive;
+* **value - connack**: from the CONNACK to the first value (what the bridge adds to the
+  cluster's own reconnect time: bench/cluster_floor.py measures a plain client's).
 
     .venv/bin/python bench/cluster.py [rounds]
 """
@@ -106,12 +111,19 @@ async def main(rounds: int) -> None:
         f"NATS {version}, 3 nodes (JetStream, MQTT streams and consumers R3), 3 sites; each "
         f"node killed in turn, {rounds} round(s) per front; ms from the kill\n"
     )
-    print("| front | node | site | " + " | ".join(FIGURES) + " | failed connects | lost |")
-    print("| --- | ---: | ---: | " + " | ".join("---:" for _ in FIGURES) + " | ---: | ---: |")
+    print(
+        "| front | node | site | "
+        + " | ".join(FIGURES)
+        + " | value - connack | failed connects | lost |"
+    )
+    print(
+        "| --- | ---: | ---: | " + " | ".join("---:" for _ in FIGURES) + " | ---: | ---: | ---: |"
+    )
     for row in found:
         figures = " | ".join(f"{ms(row, f):.0f}" for f in FIGURES)
+        after = ms(row, "first value") - ms(row, "connected")
         print(
-            f"| {row['front']} | {row['node']} | {row['site']} | {figures} | "
+            f"| {row['front']} | {row['node']} | {row['site']} | {figures} | {after:.0f} | "
             f"{row['failed attempts']} | {row['lost']}/{row['judged']} |"
         )
     print()

@@ -2,9 +2,10 @@
 
 ``Bridge(loaded).run()`` runs one TaskGroup: the engine (every bus and device) and the
 MQTT session, which reconnects by itself (bridge/mqtt/reconnect.py). Every (re)connect
-subscribes to the command topics, clears retained discovery configs the bridge no longer
-produces, publishes discovery and the whole state. Commands go through the dispatcher
-(bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
+subscribes to the command topics (at QoS 0), publishes the whole state, then ``online``
+and discovery (the first one of a run also clears retained discovery configs the bridge no
+longer produces), and serves commands from the base-topic check on. Commands go through
+the dispatcher (bridge/dispatcher.py: retained ones refused, bounded, all or nothing, never late);
 anything refused or failing goes to ``<base>/<device>/error``. Handling one message never
 waits for a device or a broker round trip, and no exception from one message leaves the
 message loop. At most ``MAX_REQUESTS`` management requests run at a time. A subscription
@@ -18,8 +19,9 @@ message it published. One bridge per base topic: before a connection says ``onli
 ``check_alone`` (bridge/standby.py) checks that no other live bridge serves the topic
 (else this one stands by without polling: bridge/core/instance.py), and a bridge that
 comes up beside this one later is told apart by the ``bridge/info`` it publishes. Before
-its first state, a session reads the device documents it left retained, so counters
-and alarm events carry on across a restart (bridge/carry_over.py).
+its first state, the first session of a run (and the first after standing by) reads the
+device documents left retained, so counters and alarm events carry on across a restart
+(bridge/carry_over.py).
 
 The wiring: the parts call back into the bridge, and every callback is named in
 ``__init__`` and ``run``:
@@ -138,7 +140,13 @@ class Bridge:
         self.mqtt_state = "connecting"
         self._rival: Instance | None = None  # a bridge that came up beside this one
         self._engine: asyncio.Task[None] | None = None
-        self.subscriptions = Subscriptions(self._wanted(), max(1, self.mqtt.qos))
+        # every subscription at QoS 0: the session is clean, so QoS 1 on the way to the
+        # bridge would add only a redelivery (a command twice is worse than once lost)
+        # and, on NATS, a JetStream consumer per subscription, which a cluster creates
+        # slowly after a node failure while the connection's other packets wait
+        # (docs/brokers.md, "On a cluster")
+        self.subscriptions = Subscriptions(self._wanted(), 0)
+        self._carry_over = True  # read what was left retained: a start, or after standby
         # requests beyond the management API, by command (the demo's "demo/fault")
         self.extra_requests: dict[str, Callable[[bytes], Awaitable[str]]] = {}
 
@@ -174,17 +182,12 @@ class Bridge:
         topics = self.topics
         commands = (*topics.command_filters(), topics.bridge_requests)
         return [
-            # at QoS 0: a clean session keeps nothing across connections, so QoS 1 would
-            # add only a redelivery (a command twice is worse than once lost) and, on NATS,
-            # a JetStream consumer per subscription, which after a node failure took the
-            # SUBACK and then lost commands for seconds (tests/integration/test_cluster.py)
             Wanted(
                 "commands",
                 commands,
                 "commands and requests do not reach the bridge",
                 live_only=True,
                 level=logging.ERROR,
-                qos=0,
             ),
             Wanted("home_assistant", (topics.ha_status,), "Home Assistant's restarts go unnoticed"),
             Wanted(
@@ -199,6 +202,8 @@ class Bridge:
         """Follow the MQTT side; a bridge that stands by does not poll (a device that takes
         one TCP client, or one master on its line, is the other bridge's)."""
         self.mqtt_state = state
+        if state == "standby":
+            self._carry_over = True  # the other bridge published meanwhile
         if state == "standby" and self._engine is not None:
             self._engine.cancel()  # a write in flight is finished first
             self._engine = None
@@ -211,8 +216,10 @@ class Bridge:
     async def _session(self, client: MqttClient) -> None:
         """One connection: subscriptions asked for beside everything else (bridge/
         subscriptions.py); once no other bridge serves the base topic (bridge/standby.py),
-        ``online``, then clean up, publish everything, and serve. A command that came
-        meanwhile waits in the connection's queue (or goes with it, standing by)."""
+        what was left retained is read back (at a start or after standing by: bridge/
+        carry_over.py), commands are served, the state goes out, then ``online``, discovery
+        and what publishes changes. A command that came before that waits in the
+        connection's queue (or goes with it, standing by)."""
         client.farewell = functools.partial(self._farewell, client)
         if self.remove_on_stop:
             client.goodbye = b""
@@ -223,30 +230,44 @@ class Bridge:
                 for wanted in self.subscriptions.wanted:
                     group.create_task(self.subscriptions.keep(client, wanted))
                 await check_alone(client, self.topics, self.instance)
-                await carry_over(client, self.topics, self.engine, self.state)
-                await client.announce()
+                if self._carry_over:  # within a run the bridge knows what it published
+                    await carry_over(client, self.topics, self.engine, self.state)
+                    self._carry_over = False
                 self._polling()
-                # values, devices and info in one burst: one round trip, and no value waits
-                # for a slow broker's PUBACK of another message (a cluster storing them)
+                # from here on no command waits for the broker's acknowledgements: on a
+                # cluster electing its leaders those took seconds, long enough for the
+                # commands that came meanwhile to expire (bridge/dispatcher.py)
+                serving = group.create_task(self._serve(client))
+                # values, devices and info in one burst before ``online``: one round trip,
+                # and on a broker that stores each retained message before it passes it on
+                # (NATS), nothing of ``online``'s waits sits ahead of the values
                 await self.state.everything(client, with_info=True)
-                # commands are served from here on; discovery (its stale-config sweep takes
-                # a second or more) goes out beside them, then what publishes changes
+                await client.announce()
+                # discovery (its stale-config sweep at the first session only: it is a
+                # retained read, seconds on a cluster) beside the commands, then what
+                # publishes changes
                 group.create_task(self._discovery_then_publishers(client, group))
-                async for message in client.messages():
-                    self._handle(message)
-                    if self._rival is not None:
-                        raise BaseTopicTakenError(
-                            taken_message(self.mqtt.base_topic, self._rival, STANDBY_RETRY)
-                        )
+                await serving
         except ExceptionGroup as failed:  # the MQTT error, so the reconnect loop sees it
             raise first_of(failed, MqttError) or failed from None
+        finally:
+            self.subscriptions.reset()  # nothing is held between sessions
+
+    async def _serve(self, client: MqttClient) -> None:
+        """Handle every message of the session; a rival's ``bridge/info`` ends it."""
+        async for message in client.messages():
+            self._handle(message)
+            if self._rival is not None:
+                raise BaseTopicTakenError(
+                    taken_message(self.mqtt.base_topic, self._rival, STANDBY_RETRY)
+                )
 
     async def _discovery_then_publishers(
         self, client: MqttClient, group: asyncio.TaskGroup
     ) -> None:
         """Discovery first (a change published before it would publish it a second
         time), then the tasks that publish changes, refreshes, republishes and health."""
-        await self.discovery.publish(client, clear_stale=True)
+        await self.discovery.publish(client, clear_stale=not self.discovery.swept)
         for work in (
             self.state.run,
             self.state.refresh,
@@ -347,10 +368,19 @@ class Bridge:
 
     def _spawn(self, work: Any, failed: Callable[[str], None] | None = None) -> None:
         """Run a command's or request's work in the bridge's TaskGroup; whatever it raises
-        is logged (and reported through ``failed``), never taken for the bridge's end."""
+        is logged (and reported through ``failed``), never taken for the bridge's end. Once
+        the bridge is stopping it is not started (a publish acknowledged during the stop
+        asked for one: the stop ended with a RuntimeError)."""
         if self._group is None:
             raise RuntimeError("the bridge is not running")
-        self._group.create_task(_guarded(work, failed))
+        guarded = _guarded(work, failed)
+        try:
+            self._group.create_task(guarded)
+        except RuntimeError:  # the bridge is stopping: its TaskGroup takes no new task
+            guarded.close()
+            if asyncio.iscoroutine(work):
+                work.close()
+            log.debug("the bridge is stopping: work not started")
 
     # --- management -------------------------------------------------------------------
 

@@ -9,7 +9,8 @@ without units. Devices without such entities are published at once.
 ``DiscoveryPublisher.publish(client)`` sends the bridge device and every ready device;
 with ``only=device_id`` just that device, and only when its payload changed; with
 ``clear_stale`` the retained configs this bridge published before but no longer produces
-(a removed device or entity) are emptied after (a device not ready yet keeps its config).
+(a removed device or entity) are emptied after (a device not ready yet keeps its config);
+the bridge asks for that until one sweep was done (``swept``), again after a reload.
 Those are found two ways: the retained configs under the discovery prefix that carry this
 bridge's identifiers, and the list of topics the last full publish recorded, retained on
 ``<base>/bridge/discovery``, which is read by its exact name: RabbitMQ sends no retained
@@ -67,9 +68,14 @@ class DiscoveryPublisher:
         self._sent: dict[str, int] = {}  # device -> digest of its configs as sent
         self._readings: dict[str, dict[str, Value]] = {}  # the readings each payload admits
         self._sweep_refused = False  # the broker refused the sweep's subscriptions (said once)
+        # the stale configs were swept this run: only a start (or a reload) leaves any, and
+        # the sweep is a retained read, seconds on a cluster after a node failure
+        self.swept = False
 
     def forget(self, device_id: str) -> None:
-        """Build the device's discovery afresh next time (its mapping changed)."""
+        """Build the device's discovery afresh next time (its mapping changed), and sweep
+        stale configs again at the next session."""
+        self.swept = False
         self._sent.pop(device_id, None)
         self._readings.pop(device_id, None)
 
@@ -186,6 +192,7 @@ class DiscoveryPublisher:
             await self._clear_stale(client, current)
             record = json.dumps(sorted(current)).encode()
             await client.publish(self.topics.bridge_discovery, record, retain=True)
+            self.swept = True
         return sent
 
     @staticmethod

@@ -37,7 +37,6 @@ class Wanted:
     without_it: str  # what does not work meanwhile, for the log
     live_only: bool = False  # commands: no retained message, the retain flag kept
     level: int = logging.WARNING  # how a failure is said the first time
-    qos: int | None = None  # None: the session's
 
 
 class Subscriptions:
@@ -50,7 +49,7 @@ class Subscriptions:
         self.reset()
 
     def reset(self) -> None:
-        """A new session: nothing is held yet."""
+        """A new session, or none: nothing is held."""
         self.states = {w.name: "pending" for w in self.wanted}
 
     async def keep(self, client: MqttClient, wanted: Wanted) -> None:
@@ -60,8 +59,7 @@ class Subscriptions:
         while True:
             tries += 1
             try:
-                qos = self.qos if wanted.qos is None else wanted.qos
-                await client.subscribe(*wanted.filters, qos=qos, live_only=wanted.live_only)
+                await client.subscribe(*wanted.filters, qos=self.qos, live_only=wanted.live_only)
             except MqttRefusedError as exc:
                 unanswered = isinstance(exc, MqttUnackedError)
                 self.states[wanted.name] = "pending" if unanswered else "refused"

@@ -47,7 +47,7 @@ NOTES: dict[str, str] = {
     "MqttConfig.password_env": "environment variable holding the password",
     "MqttConfig.tls": "TLS settings for `mqtts://` URLs",
     "MqttConfig.keepalive": "MQTT keepalive",
-    "MqttConfig.qos": "QoS of published messages and subscriptions",
+    "MqttConfig.qos": "QoS of published messages (the bridge subscribes at QoS 0: docs/brokers.md)",
     "TlsConfig.ca": "CA bundle that signed the broker's certificate",
     "TlsConfig.cert": "client certificate (mutual TLS)",
     "TlsConfig.key": "private key of the client certificate",

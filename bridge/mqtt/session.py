@@ -7,7 +7,8 @@ takes the connection but never answers an MQTT 5 CONNECT, as amqtt does, then pu
 checks). Leaving cleanly (the session returned or was cancelled: a stop) publishes the
 caller's ``farewell`` messages (retained: devices going offline, or empty payloads that
 remove what the session published, ``retained_topics``), then ``goodbye`` on the will
-topic (``offline``; empty removes it), all at once, and disconnects once the broker
+topic (``offline``; empty removes it), all at once (also when the session published
+retained messages before its ``online``), and disconnects once the broker
 acknowledged them all; if it did not within ``FAREWELL_TIMEOUT`` seconds, the socket is
 closed without DISCONNECT, so the broker publishes the will. Incoming messages are
 ``Message`` values, decoupled from paho. The caller owns the reconnect loop
@@ -199,7 +200,9 @@ class MqttClient:
         if connection is None:
             return
         taken = exc_type is not None and issubclass(exc_type, BaseTopicTakenError)
-        if taken or not self.announced:  # the will topic is another bridge's, or not said
+        # ``online`` said, or a state published before it (a stop takes that back too)
+        said = self.announced or bool(self.retained_topics)
+        if taken or not said:  # the will topic is another bridge's, or nothing was said
             self.announced = False
             await self._leave_quietly(connection)
             return
@@ -382,9 +385,11 @@ class MqttClient:
         """The retained messages under ``topic_filter`` now (topic -> payload), only those
         whose topic ``keep`` accepts if given (the others are not held in memory).
 
-        Subscribes, collects until no retained message came for ``settle`` seconds (or
-        ``limit`` were kept: 1 for a single topic, whose message comes at once), then
-        unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
+        Subscribes (at QoS 0: a retained message is read once, nothing to redeliver; on
+        NATS a QoS 1 subscription is a JetStream consumer, which a cluster creates slowly
+        after a node failure), collects until no retained message came for ``settle``
+        seconds (or ``limit`` were kept: 1 for a single topic, whose message comes at once),
+        then unsubscribes (unless ``subscribe()`` asked for the same filter). Live messages
         keep flowing to ``messages()`` meanwhile.
         """
         connection = self._require()
@@ -393,7 +398,7 @@ class MqttClient:
         queue: asyncio.Queue[Received] = asyncio.Queue()
         connection.collectors[topic_filter] = queue
         try:
-            await self.subscribe(topic_filter)
+            await self.subscribe(topic_filter, qos=0)
             while True:
                 try:  # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancel
                     async with asyncio.timeout(settle):
@@ -417,7 +422,8 @@ class MqttClient:
     @contextlib.asynccontextmanager
     async def watching(self, topic: str) -> AsyncIterator[Callable[[], Awaitable[Message]]]:
         """Every message on ``topic`` (one topic, no wildcard), retained or live, for the
-        block's ``next()`` alone: ``messages()`` does not see them, nor they its own."""
+        block's ``next()`` alone: ``messages()`` does not see them, nor they its own
+        (subscribed at QoS 0, as ``retained``)."""
         connection = self._require()
         queue: asyncio.Queue[Received] = asyncio.Queue()
         connection.watchers[topic] = queue
@@ -426,7 +432,7 @@ class MqttClient:
             return _message(await queue.get())
 
         try:
-            await self.subscribe(topic)
+            await self.subscribe(topic, qos=0)
             yield following
             await self._unsubscribe(connection, topic)
         finally:

@@ -9,12 +9,13 @@ nodes) or the three node URLs, starting at its own node, so that every failure h
 different mix of sites. Per failure (``Cluster.fail(k)``): a subscriber (QoS 0, as Home
 Assistant subscribes to state) on a node that stays up; a commander, also on a surviving
 node, sends each site a command every ``COMMAND_EVERY`` seconds, each with its own value,
-from before the kill until ``AFTER_LIVE`` seconds after the site's command subscription is
+alternately at QoS 0 (Home Assistant's default) and QoS 1, one connection each, from before
+the kill until ``AFTER_LIVE`` seconds after the site's command subscription is
 live again; node ``k`` is killed (SIGKILL); then node ``k`` starts again and the cluster
 settles before the next failure.
 
-Per site hit by the failure, ``Failure`` has: when the bridge saw the loss, when it said
-online again, when its command subscription was live, when its first value reached the
+Per site hit by the failure, ``Failure`` has: when the bridge saw the loss, when its new
+session started (CONNACK), when it said online again, when its command subscription was live, when its first value reached the
 subscriber, and per command its send time and the simulator's writes of its value.
 """
 
@@ -53,7 +54,10 @@ class Command:
     site: int
     value: int
     sent: float  # monotonic, before the PUBLISH left
-    acked: float | None = None  # when the broker acknowledged it (PUBACK): the broker's now
+    qos: int = 0
+    # QoS 1: when the broker acknowledged it (PUBACK), the broker's now; QoS 0: when the
+    # PUBLISH was handed to the socket (nothing more to wait for)
+    acked: float | None = None
 
 
 @dataclass
@@ -62,15 +66,18 @@ class SiteFailure:
 
     site: int
     lost: float | None = None  # the bridge saw the connection end
+    connected: float | None = None  # its session started again (the CONNACK came)
     online: float | None = None  # the bridge said online again
     live: float | None = None  # its command subscription was held again
     first_value: float | None = None  # its state reached the subscriber on a surviving node
+    # (the first after the loss: the bridge publishes its state before it says online)
     commands: list[Command] = field(default_factory=list)
     writes: dict[int, list[float]] = field(default_factory=dict)  # value -> write times
 
     def judged(self) -> list[Command]:
         """The commands sent once the bridge said its command subscription was live, and
-        acknowledged by the broker (one it never took is the publisher's to send again)."""
+        taken by the broker (a QoS 1 one it never acknowledged is the publisher's to send
+        again)."""
         assert self.live is not None
         return [c for c in self.commands if c.sent >= self.live and c.acked is not None]
 
@@ -113,12 +120,18 @@ class Site:
         self.base = f"site{index}"
         self.states: list[tuple[float, str]] = []
         report = bridge._mqtt_is
+        session = bridge._session
 
         def follow(state: str) -> None:
             self.states.append((time.monotonic(), state))
             report(state)
 
+        async def connected(client: MqttClient) -> None:
+            self.states.append((time.monotonic(), "connected"))  # the CONNACK came
+            await session(client)
+
         bridge._mqtt_is = follow  # type: ignore[method-assign]
+        bridge._session = connected  # type: ignore[method-assign]
 
     @property
     def live(self) -> bool:
@@ -210,16 +223,14 @@ class Cluster:
             await asyncio.sleep(COMMAND_EXPIRY)  # the last ones written, or given up
         for site, seen in zip(hit, failure.sites, strict=True):
             seen.lost = site.event_after("offline", killed)
+            assert seen.lost is not None
+            seen.connected = site.event_after("connected", seen.lost)
             seen.online = site.event_after("online", killed)
             seen.writes = site.writes_since(killed - 0.5)
             seen.commands = [c for c in failure.commands if c.site == site.index]
             assert seen.online is not None
             seen.first_value = next(
-                (
-                    at
-                    for topic, at in arrivals
-                    if topic == f"{site.base}/drive" and at >= seen.online
-                ),
+                (at for topic, at in arrivals if topic == f"{site.base}/drive" and at >= seen.lost),
                 None,
             )
         self.failures.append(failure)
@@ -231,7 +242,7 @@ class Cluster:
         while True:
             for site in self.sites:
                 value += 1
-                command = Command(site.index, value, time.monotonic())
+                command = Command(site.index, value, time.monotonic(), qos=value % 2)
                 if await send(f"{site.base}/drive/{KEY}/set", command):
                     failure.commands.append(command)
             await asyncio.sleep(COMMAND_EVERY)
@@ -274,31 +285,33 @@ async def _subscriber(url: str, topics: list[str]) -> AsyncIterator[list[tuple[s
 
 @contextlib.asynccontextmanager
 async def _commander(url: str) -> AsyncIterator[Any]:
-    """``send(topic, command)``: a QoS 1 publish of the command's value from a client on ``url`` that does not wait
-    for the PUBACK (a cluster electing a stream leader may hold it for seconds); a lost
-    connection is opened again. False: not sent (no connection)."""
+    """``send(topic, command)``: a publish of the command's value at its QoS (0, as Home
+    Assistant sends commands by default, or 1) from a client on ``url``, one connection per
+    QoS: on NATS 2.9 a QoS 1 PUBLISH holds the packets behind it on its connection until
+    JetStream stored it, seconds while a stream elects its leader. Does not wait for the
+    PUBACK; a lost connection is opened again. False: not sent (no connection)."""
     config = MqttConfig(url=url, version="3.1.1", keepalive=10)
-    client: MqttClient | None = None
+    clients: dict[int, MqttClient] = {}
     pending: set[asyncio.Task[None]] = set()
 
-    async def publish(topic: str, command: Command) -> None:
+    async def publish(client: MqttClient, topic: str, command: Command) -> None:
         with contextlib.suppress(MqttError, TimeoutError):
             async with asyncio.timeout(10):
-                assert client is not None
-                await client.publish(topic, str(command.value), qos=1)
+                await client.publish(topic, str(command.value), qos=command.qos)
                 command.acked = time.monotonic()
 
     async def send(topic: str, command: Command) -> bool:
-        nonlocal client
+        client = clients.get(command.qos)
         if client is None or client._connection is None or client._connection.lost:
-            client = MqttClient(config, will_topic="commander/state", announce=False)
+            client = MqttClient(config, will_topic=f"commander{command.qos}/state", announce=False)
             try:
                 async with asyncio.timeout(5):
                     await client.__aenter__()
             except (MqttError, TimeoutError):
-                client = None
+                clients.pop(command.qos, None)
                 return False
-        task = asyncio.create_task(publish(topic, command))
+            clients[command.qos] = client
+        task = asyncio.create_task(publish(client, topic, command))
         pending.add(task)
         task.add_done_callback(pending.discard)
         return True
@@ -308,7 +321,7 @@ async def _commander(url: str) -> AsyncIterator[Any]:
     finally:
         for task in list(pending):
             await cancel(task)
-        if client is not None:
+        for client in clients.values():
             with contextlib.suppress(MqttError):
                 await client.__aexit__(None, None, None)
 
@@ -350,6 +363,7 @@ def describe(failure: Failure) -> str:
                 {
                     "site": s.site,
                     "lost": _ms(s.lost, failure.killed),
+                    "connected": _ms(s.connected, failure.killed),
                     "online": _ms(s.online, failure.killed),
                     "live": _ms(s.live, failure.killed),
                     "first_value": _ms(s.first_value, failure.killed),

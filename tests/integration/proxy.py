@@ -9,6 +9,8 @@ from collections.abc import AsyncIterator
 
 from tests.integration.mosquitto import Broker
 
+PUBACK = 0x40
+
 
 class Relay:
     """Client <-> relay <-> broker. ``delay``: the broker's answers reach the client that
@@ -16,7 +18,9 @@ class Relay:
     ``hold_after``: the same after that many answers (2: the CONNACK and one SUBACK, so
     the session waits for the others);
     ``unanswered``: a topic filter whose first SUBSCRIBE the broker's SUBACK never answers
-    (a cluster that did not create its consumer in time); ``cut()``: every connection closed at once (no await: the caller picks the moment) and
+    (a cluster that did not create its consumer in time); ``late_pubacks``: the broker's
+    PUBACKs reach the client that many seconds late, everything else at once (NATS storing
+    each QoS 1 publish in JetStream while a stream elects its leader); ``cut()``: every connection closed at once (no await: the caller picks the moment) and
     new ones closed as soon as accepted, until ``mend()``."""
 
     def __init__(self, broker: Broker) -> None:
@@ -25,6 +29,7 @@ class Relay:
         self.hold = False
         self.hold_after: int | None = None
         self.unanswered: bytes | None = None
+        self.late_pubacks = 0.0
         self._dropping: set[bytes] = set()  # packet ids of SUBSCRIBEs left unanswered
         self.url = ""
         self._open = True
@@ -77,9 +82,13 @@ class Relay:
         while chunk := await reader.read(65536):
             if self.hold:
                 continue
-            if self._dropping or pending:  # whole packets only, while one is looked for
+            if self._dropping or pending or self.late_pubacks:  # whole packets only
                 packets, pending = _split(pending + chunk)
-                chunk = b"".join(p for p in packets if not self._unanswered(p))
+                packets = [p for p in packets if not self._unanswered(p)]
+                late = b"".join(p for p in packets if p[0] == PUBACK and self.late_pubacks)
+                if late:
+                    loop.call_later(self.late_pubacks, write, late)
+                chunk = b"".join(p for p in packets if p[0] != PUBACK or not self.late_pubacks)
             if self.delay:
                 loop.call_later(self.delay, write, chunk)
             else:
