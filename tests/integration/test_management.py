@@ -100,8 +100,10 @@ async def request(observer: Observer, command: str, body: dict[str, Any] | bytes
 
 
 async def online(bridge: Bridge, tester: Observer | None = None) -> None:
-    """Every device answers (and the bridge listens: its info, sent after subscribing)."""
+    """Every device answers, the bridge said online (its values and info go out before
+    that) and it listens (its info, sent after subscribing)."""
     await eventually(lambda: all(p.health.online for p in bridge.engine.devices.values()), 10)
+    await eventually(lambda: bridge.mqtt_state == "online", 10)
     if tester is not None:
         await eventually(lambda: "modbus/bridge/info" in tester.retained, 10)
 
