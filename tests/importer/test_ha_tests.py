@@ -44,7 +44,7 @@ def hub_of(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_every_home_assistant_test_file_is_here() -> None:
-    assert [path.stem for path in FILES] == ["test_switch"]
+    assert [path.stem for path in FILES] == ["test_binary_sensor", "test_switch"]
 
 
 @pytest.mark.parametrize(("test", "config"), _configs(), ids=[t for t, _ in _configs()])
@@ -79,3 +79,23 @@ def test_home_assistant_switch_states_read_the_same(tmp_path: Path, case: dict[s
         word &= 1  # a coil read answers bits: the first is bit 0 of what the test returns
     shown = case["bridge"] if "bridge" in case else STATE[case["expected"]]
     assert decode(point, {(point.table, 1234): word}) is shown
+
+
+def _binary_states() -> list[dict[str, Any]]:
+    data = yaml.safe_load((DATA / "test_binary_sensor.yaml").read_text(encoding="utf-8"))
+    return list(data["states"])
+
+
+@pytest.mark.parametrize(
+    "case", _binary_states(), ids=lambda c: f"{c['input_type']}-{c['words'][:2]}"
+)
+def test_home_assistant_binary_sensor_states_read_the_same(
+    tmp_path: Path, case: dict[str, Any]
+) -> None:
+    sensor = {"name": "Test entity", "address": 51, "input_type": case["input_type"]}
+    (device,) = convert(tmp_path, HUB | {"binary_sensors": [sensor]}).devices
+    point = Mapping.model_validate(device.mapping).points()["test_entity"]
+    word = case["words"][0]
+    if point.table.is_bits:
+        word &= 1  # a bit read: the first bit is bit 0 of what the test returns
+    assert decode(point, {(point.table, 51): word}) is STATE[case["expected"]]
