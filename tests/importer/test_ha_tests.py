@@ -44,7 +44,12 @@ def hub_of(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_every_home_assistant_test_file_is_here() -> None:
-    assert [path.stem for path in FILES] == ["test_binary_sensor", "test_switch"]
+    assert [path.stem for path in FILES] == [
+        "test_binary_sensor",
+        "test_fan",
+        "test_light",
+        "test_switch",
+    ]
 
 
 @pytest.mark.parametrize(("test", "config"), _configs(), ids=[t for t, _ in _configs()])
