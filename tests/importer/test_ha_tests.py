@@ -46,6 +46,8 @@ def hub_of(config: dict[str, Any]) -> dict[str, Any]:
 def test_every_home_assistant_test_file_is_here() -> None:
     assert [path.stem for path in FILES] == [
         "test_binary_sensor",
+        "test_climate",
+        "test_cover",
         "test_fan",
         "test_light",
         "test_switch",
