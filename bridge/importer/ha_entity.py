@@ -99,6 +99,11 @@ def sensor(node: Node, result: Import) -> list[Draft]:
             draft.ha[key] = node[key]
     if not _shaping(draft, result, shape[0]):
         return []
+    for key in ("slave_count", "virtual_count"):
+        if key in node and node.get("data_type") in ("custom", "string"):
+            reason = f"not with data_type {node['data_type']} (Home Assistant refuses it)"
+            result.note(node.at(key), f"{draft.name}.{key}", reason)
+            return []
     return _copies(draft, result, shape[1])
 
 

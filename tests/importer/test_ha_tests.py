@@ -40,7 +40,7 @@ def convert(tmp_path: Path, hub: dict[str, Any]) -> Import:
 def hub_of(config: dict[str, Any]) -> dict[str, Any]:
     """A hub with the test's entities (a test's own hub settings, when it has them)."""
     entities = {k: v for k, v in config.items() if k not in ("test", "expect", "hub")}
-    return HUB | config.get("hub", {}) | entities
+    return config.get("hub", HUB) | entities
 
 
 def test_every_home_assistant_test_file_is_here() -> None:
@@ -49,6 +49,7 @@ def test_every_home_assistant_test_file_is_here() -> None:
         "test_climate",
         "test_cover",
         "test_fan",
+        "test_init",
         "test_light",
         "test_switch",
     ]
