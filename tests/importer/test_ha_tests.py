@@ -23,7 +23,7 @@ HUB = {"name": "hub", "type": "tcp", "host": "127.0.0.1", "port": 502}
 STATE = {"on": True, "off": False, None: None}
 
 
-def _configs() -> list[tuple[str, dict[str, Any]]]:
+def configs() -> list[tuple[str, dict[str, Any]]]:
     return [
         (f"{path.stem}::{config['test']}", config)
         for path in FILES
@@ -55,7 +55,7 @@ def test_every_home_assistant_test_file_is_here() -> None:
     ]
 
 
-@pytest.mark.parametrize(("test", "config"), _configs(), ids=[t for t, _ in _configs()])
+@pytest.mark.parametrize(("test", "config"), configs(), ids=[t for t, _ in configs()])
 def test_each_entity_is_converted_or_reported_by_name(
     tmp_path: Path, test: str, config: dict[str, Any]
 ) -> None:
