@@ -125,6 +125,8 @@ def decode(point: Point, image: Image) -> Value:
         text = _to_bytes(words, entity.byte_order).decode("latin-1")
         return text.rstrip("\x00 ").lstrip("\x00")
     if kind is DataType.BOOL:
+        if entity.words is not None:
+            return entity.words.state(words[0])
         return _finish(entity, int(bool(words[0])))
     unsigned = unsigned_raw(entity, words)
     if unsigned in entity.sentinels:
@@ -152,11 +154,27 @@ def _shortest_f32(bits: int) -> float | None:
 
 
 def _scaled_float(entity: Entity, number: float) -> float:
-    """A float register's value * scale + offset (the mapping's unit, e.g. Wh -> kWh)."""
-    if entity.scale == 1 and entity.offset == 0:
+    """A float register's value * scale + offset (the mapping's unit, e.g. Wh -> kWh),
+    then clamped and zero-suppressed."""
+    if entity.scale != 1 or entity.offset != 0:
+        exact = Decimal(repr(number)) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
+        number = float(f"{float(exact):.9g}")
+    if entity.clamp is None and entity.zero_suppress is None:
         return number
-    exact = Decimal(repr(number)) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
-    return float(f"{float(exact):.9g}")
+    return float(_shaped(entity, Decimal(repr(number))))
+
+
+def _shaped(entity: Entity, exact: Decimal) -> Decimal:
+    """A reading after scale and offset as Home Assistant's modbus sensor shows it: clamped
+    into ``clamp`` (min first, then max), then 0 when its size is at most ``zero_suppress``."""
+    limits = entity.clamp
+    if limits is not None and limits.min is not None and exact < Decimal(repr(limits.min)):
+        exact = Decimal(repr(limits.min))
+    if limits is not None and limits.max is not None and exact > Decimal(repr(limits.max)):
+        exact = Decimal(repr(limits.max))
+    if entity.zero_suppress is not None and abs(exact) <= Decimal(repr(entity.zero_suppress)):
+        return Decimal(0)
+    return exact
 
 
 def _unscaled_float(entity: Entity, number: float) -> float:
@@ -184,12 +202,15 @@ def _finish(entity: Entity, raw: int) -> Value:
         return entity.enum.get(raw, unknown_code(raw))
     if entity.kind == "bool":
         return bool(raw)
-    return scale_value(entity, raw)
+    return scale_value(entity, raw, shaped=True)
 
 
-def scale_value(entity: Entity, raw: int) -> int | float:
-    """raw * scale + offset, exact in decimal, as an int when the entity has no decimals."""
+def scale_value(entity: Entity, raw: int, shaped: bool = False) -> int | float:
+    """raw * scale + offset, exact in decimal, as an int when the entity has no decimals;
+    ``shaped``: clamped and zero-suppressed before rounding (a reading, not a range end)."""
     exact = Decimal(raw) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
+    if shaped:
+        exact = _shaped(entity, exact)
     if entity.decimals == 0:
         return int(exact.to_integral_value(ROUND_HALF_UP))
     return float(round(exact, entity.decimals))
@@ -306,7 +327,10 @@ def _raw_for(point: Point, value: object, image: Image) -> int:
     if entity.enum is not None:
         return _enum_raw(point, value)
     if entity.kind == "bool":
-        return int(parse_bool(point.key, value))
+        on = parse_bool(point.key, value)
+        if entity.words is not None:  # the mapping's words, never one the command names
+            return entity.words.write_on if on else entity.words.write_off
+        return int(on)
     number = _number(point, value, image)
     raw = unscale_value(entity, number)
     low, high = raw_bounds(entity)

@@ -19,7 +19,7 @@ import re
 from collections.abc import Mapping
 from enum import StrEnum
 from functools import cached_property
-from typing import Any, Self
+from typing import Annotated, Any, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -159,6 +159,64 @@ class RawRange(BaseModel):
     max: int | None = None
 
 
+class SwitchWords(BaseModel):
+    """The words a switch on a register writes for ON and OFF, and the words it reads as
+    on or off, when they are not 1 and 0 (a relay module that takes 0x0100 to close and
+    0x0200 to open). A word read that is in neither list is published as unknown: the
+    switch's state is not guessed. Commands stay ON/OFF; only these words are written."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    write_on: int = Field(ge=0, le=0xFFFF, description="the word written for ON")
+    write_off: int = Field(ge=0, le=0xFFFF, description="the word written for OFF")
+    read_on: tuple[Annotated[int, Field(ge=0, le=0xFFFF)], ...] | None = Field(
+        None, min_length=1, max_length=16, description="words read as on (default: write_on)"
+    )
+    read_off: tuple[Annotated[int, Field(ge=0, le=0xFFFF)], ...] | None = Field(
+        None, min_length=1, max_length=16, description="words read as off (default: write_off)"
+    )
+
+    @model_validator(mode="after")
+    def _distinct(self) -> Self:
+        if self.write_on == self.write_off:
+            raise ValueError("write_on and write_off are different words")
+        if set(self.on_words) & set(self.off_words):
+            raise ValueError("a word cannot read as both on and off")
+        return self
+
+    @property
+    def on_words(self) -> tuple[int, ...]:
+        return self.read_on if self.read_on is not None else (self.write_on,)
+
+    @property
+    def off_words(self) -> tuple[int, ...]:
+        return self.read_off if self.read_off is not None else (self.write_off,)
+
+    def state(self, word: int) -> bool | None:
+        """On, off, or None (unknown) for a word that is neither."""
+        if word in self.on_words:
+            return True
+        return False if word in self.off_words else None
+
+
+class ReadingLimits(BaseModel):
+    """Limits a reading is shown within (Home Assistant's sensor ``min_value`` and
+    ``max_value``): a value below ``min`` reads ``min``, above ``max`` reads ``max``."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    min: float | None = Field(None, allow_inf_nan=False)
+    max: float | None = Field(None, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Self:
+        if self.min is None and self.max is None:
+            raise ValueError("give min, max or both")
+        if self.min is not None and self.max is not None and self.min > self.max:
+            raise ValueError(f"min {self.min} is above max {self.max}")
+        return self
+
+
 class StateLink(BaseModel):
     """Where a write-only select's state is read: an enum entity's label, shown as one of
     the select's options (the drive's status ``standby`` as the command ``stop``). A label
@@ -233,6 +291,20 @@ class Entity(BaseModel):
         default_factory=dict, description="raw (unsigned) values meaning 'unknown', with reason"
     )
     on_when: RawRange | None = Field(None, description="boolean: raw value within this range")
+    words: SwitchWords | None = Field(
+        None,
+        description="a switch on a register: the words it writes for ON/OFF and reads as "
+        "on/off, when not 1 and 0 (another word reads as unknown)",
+    )
+    clamp: ReadingLimits | None = Field(
+        None, description="a read-only number: a reading outside {min, max} shows the limit"
+    )
+    zero_suppress: float | None = Field(
+        None,
+        ge=0,
+        allow_inf_nan=False,
+        description="a read-only number: a reading whose size is at most this shows 0",
+    )
     min: float | None = None
     max: float | None = None
     min_from: str | None = Field(None, description="key of the entity holding the lower limit")
@@ -470,6 +542,23 @@ def _check_numeric(e: Entity) -> str | None:
         return "unit applies to numbers"
     if e.unit and e.unit_from:
         return "give unit or unit_from, not both"
+    if (e.clamp is not None or e.zero_suppress is not None) and (e.kind != "number" or e.writable):
+        return "clamp/zero_suppress shape the readings of a read-only number"
+    return None
+
+
+def _check_words(e: Entity) -> str | None:
+    """``words``: a whole-register switch that writes one word for ON, another for OFF."""
+    if e.words is None:
+        return None
+    if e.data_type is not DataType.BOOL or e.table is not Table.HOLDING:
+        return "words are for a switch on a holding register (type bool)"
+    if not e.writable or e.press is not None or e.pulse:
+        return "words are written: a switch with access rw or w (not a button or pulse)"
+    if e.byte_order is not Order.BIG:
+        return "words are given as on the wire: drop byte_order"
+    if e.write_function not in (None, 6, 16):
+        return "words are written to a register: write_function 6 or 16"
     return None
 
 
@@ -556,6 +645,7 @@ _FIELD_CHECKS = (
     _check_shape,
     _check_numeric,
     _check_enum,
+    _check_words,
     _check_write,
     _check_presentation,
 )

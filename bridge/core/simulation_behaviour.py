@@ -279,6 +279,8 @@ def _written_raw(point: Point, written: dict[Cell, int]) -> int | None:
     word, entity = written[cell], point.entity
     if entity.field_width is not None:
         return (word >> (entity.bit or 0)) & ((1 << entity.field_width) - 1)
+    if entity.words is not None:
+        return int(entity.words.state(word) is True)
     return int(word != 0) if entity.kind == "bool" else word
 
 

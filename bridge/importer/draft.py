@@ -73,7 +73,9 @@ def mapping_document(
 
 
 def whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict[str, Any]:
-    """The entities that pass the checks across entities (overlaps...); the rest noted."""
+    """The entities that pass the checks across entities (overlaps...); the rest noted: the
+    entity an error is about (``entities.<key>.``: the second of two on one register), else
+    the entities it names, else all."""
     where = {d.name: d.node.where for d in drafts}
     for _ in range(len(entities) + 1):
         if not entities:
@@ -85,7 +87,8 @@ def whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict
             rows = list(format_validation_errors(exc))
         else:
             return entities
-        named = [k for k in entities if any(f"entities.{k}" in r or f"'{k}'" in r for r in rows)]
+        named = [k for k in entities if any(r.startswith(f"entities.{k}.") for r in rows)]
+        named = named or [k for k in entities if any(f"'{k}'" in r for r in rows)]
         for key in named or list(entities):
             name = entities.pop(key)["name"]
             result.note(where.get(name, Where(result.source, 1)), name, "; ".join(rows))

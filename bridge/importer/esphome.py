@@ -24,6 +24,16 @@ PLATFORMS = ("sensor", "binary_sensor", "switch", "number", "select", "text_sens
 _PARITY = {"NONE": "N", "EVEN": "E", "ODD": "O"}
 _SUBSTITUTION = re.compile(r"\$\{(\w+)\}|\$(\w+)")
 
+# Entities written inside a modbus_controller: ESPHome's own schema for it
+# (esphome/components/modbus_controller/__init__.py, CONFIG_SCHEMA) has no such key and
+# refuses the node; only the fork it came from (martgras' modbus_controller) nested them.
+_INLINE = frozenset(f"{platform}{plural}" for platform in PLATFORMS for plural in ("", "s"))
+_INLINE_REASON = (
+    "entities inside a modbus_controller: ESPHome refuses them there (its schema has no such "
+    "key); give each its own `- platform: modbus_controller` under sensor:, switch:, ... with "
+    "modbus_controller_id, and import again"
+)
+
 
 def import_esphome(data: Any, source: str) -> Import:
     """Convert the node's modbus controllers; the notes list what was left out."""
@@ -209,7 +219,9 @@ def _device(
     if throttle:
         config["protocol"] = {"min_request_interval": throttle}
     for key in controller:
-        if key not in ("id", "address", "modbus_id", "update_interval", "command_throttle"):
+        if key in _INLINE:
+            result.note(controller.at(key), f"{name}.{key}", _INLINE_REASON)
+        elif key not in ("id", "address", "modbus_id", "update_interval", "command_throttle"):
             result.note(controller.at(key), f"{name}.{key}", "not kept by the bridge")
     entities = whole(entities, drafts, result)
     if not entities:

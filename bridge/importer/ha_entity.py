@@ -11,6 +11,7 @@ its bit 0, a switch writes ``command_on``/``command_off`` and reads its state on
 
 from __future__ import annotations
 
+import math
 import re
 
 from bridge.importer.draft import Draft
@@ -96,20 +97,49 @@ def sensor(node: Node, result: Import) -> list[Draft]:
     for key in ("device_class", "state_class"):
         if isinstance(node.get(key), str):
             draft.ha[key] = node[key]
-    for key in ("min_value", "max_value"):
-        if key in node:
-            result.note(
-                node.at(key),
-                f"{draft.name}.{key}",
-                "Home Assistant clamps readings to it; the bridge publishes the reading as read",
-            )
-    if "zero_suppress" in node:
-        result.note(
-            node.at("zero_suppress"),
-            f"{draft.name}.zero_suppress",
-            "Home Assistant shows 0 below it; the bridge publishes the reading as read",
-        )
+    if not _shaping(draft, result, shape[0]):
+        return []
+    for key in ("slave_count", "virtual_count"):
+        if key in node and node.get("data_type") in ("custom", "string"):
+            reason = f"not with data_type {node['data_type']} (Home Assistant refuses it)"
+            result.note(node.at(key), f"{draft.name}.{key}", reason)
+            return []
     return _copies(draft, result, shape[1])
+
+
+def _shaping(draft: Draft, result: Import, kind: str) -> bool:
+    """``min_value``/``max_value`` as the reading's ``clamp`` and ``zero_suppress`` (Home
+    Assistant applies them after scale and offset, in this order); False (noted) when one
+    is not a number. A text sensor has neither."""
+    node, name = draft.node, draft.name
+    found: dict[str, float] = {}
+    for key in ("min_value", "max_value", "zero_suppress"):
+        if key not in node:
+            continue
+        value = _real(node[key])
+        if value is None or kind == "ascii" or (key == "zero_suppress" and value < 0):
+            result.note(
+                node.at(key), f"{name}.{key}", f"{node[key]!r}: not a number to show within"
+            )
+            return False
+        found[key] = value
+    clamp = {end: found[f"{end}_value"] for end in ("min", "max") if f"{end}_value" in found}
+    if clamp:
+        draft.fields["clamp"] = clamp
+    if "zero_suppress" in found:
+        draft.fields["zero_suppress"] = found["zero_suppress"]
+    return True
+
+
+def _real(value: object) -> float | None:
+    """A finite number, as Home Assistant coerces it (a number, or text of one)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        return None
+    try:
+        number = float(value)
+    except ValueError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def _shape(draft: Draft, result: Import) -> tuple[str, int] | None:
@@ -281,22 +311,46 @@ def switch(node: Node, result: Import, kind: str = "switch") -> list[Draft]:
         result.note(node.at("write_type"), f"{draft.name}.write_type", "not a write type")
         return []
     table, function = write
-    on, off = node.get("command_on", 1), node.get("command_off", 0)
-    if table == "holding" and (on, off) != (1, 0):
-        result.note(
-            node.at("command_on" if on != 1 else "command_off"),
-            f"{draft.name}.command_on",
-            f"writes {on}/{off}: a bridge switch on a register writes 1 and 0; "
-            "the entity is not converted",
-        )
-        return []
     draft.fields |= {"table": table, "type": "bool", "write_function": function}
     if table == "coil":
         del draft.fields["type"]
     draft.ha["component"] = "switch"
     if isinstance(node.get("device_class"), str):
         draft.ha["device_class"] = node["device_class"]
-    return [draft] if _verify(draft, result, table) else []
+    commands = _commands(draft, result, table)
+    if commands is None or not _verify(draft, result, table):
+        return []
+    return [draft] if _words(draft, result, table, commands) else []
+
+
+def _commands(draft: Draft, result: Import, table: str) -> tuple[int, int] | None:
+    """``command_on``/``command_off`` (16-bit words, different); None (noted) otherwise.
+    On a coil, Home Assistant writes ON for any non-zero command: 0 must be off."""
+    node, name = draft.node, draft.name
+    words = []
+    for key, default in (("command_on", 1), ("command_off", 0)):
+        value = _word(node.get(key, default))
+        if value is None:
+            result.note(node.at(key), f"{name}.{key}", "not a word 0..65535: not converted")
+            return None
+        words.append(value)
+    on, off = words
+    if on == off or (table == "coil" and (on == 0 or off != 0)):
+        result.note(
+            node.at("command_on"),
+            f"{name}.command_on",
+            f"{on}/{off} do not tell on from off on a {table}: not converted",
+        )
+        return None
+    return on, off
+
+
+def _word(value: object) -> int | None:
+    if isinstance(value, str) and value.strip().isdigit():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFFFF:
+        return None
+    return value
 
 
 def _verify(draft: Draft, result: Import, table: str) -> bool:
@@ -321,14 +375,39 @@ def _verify(draft: Draft, result: Import, table: str) -> bool:
     address = verify.get("address", draft.fields["address"])
     if isinstance(address, int) and address != draft.fields["address"]:
         draft.fields |= {"write_address": draft.fields["address"], "address": address}
-    on, off = verify.get("state_on"), verify.get("state_off")
-    if table == "holding" and (on not in (None, 1, [1]) or off not in (None, 0, [0])):
-        result.note(
-            where,
-            f"{name}.verify.state_on",
-            f"{on}/{off}: the bridge reads any non-zero word as on",
-            partly=True,
-        )
     if verify.get("delay"):
         result.note(where, f"{name}.verify.delay", "the bridge reads back at once", partly=True)
+    return True
+
+
+def _words(draft: Draft, result: Import, table: str, commands: tuple[int, int]) -> bool:
+    """A register switch's words: ``command_on``/``command_off`` written, ``verify``'s
+    ``state_on``/``state_off`` (a word or a list; by default the commands) read, so that a
+    word in neither reads unknown, not on (Home Assistant keeps its last state and logs
+    it); none for a write-only switch writing 1 and 0. A word in both lists reads on, as in
+    Home Assistant (it looks in state_on first). False (noted) when a state is no word."""
+    node, name = draft.node, draft.name
+    if table != "holding":
+        return True
+    verify = node.get("verify") if draft.fields["access"] == "rw" else None
+    states = (None, None)
+    if isinstance(verify, dict):
+        states = (verify.get("state_on"), verify.get("state_off"))
+    read: list[list[int]] = []
+    for key, given, command in zip(("state_on", "state_off"), states, commands, strict=True):
+        listed = [command] if given is None else given if isinstance(given, list) else [given]
+        words = [_word(w) for w in listed]
+        if not words or any(w is None for w in words):
+            result.note(node.at("verify"), f"{name}.verify.{key}", "not words: not converted")
+            return False
+        read.append([w for w in words if w is not None])
+    read_on, read_off = read[0], [w for w in read[1] if w not in read[0]]
+    if commands == (1, 0) and draft.fields["access"] == "w":
+        return True  # a write-only switch writes 1 and 0 without words
+    chosen: dict[str, object] = {"write_on": commands[0], "write_off": commands[1]}
+    if read_on != [commands[0]]:
+        chosen["read_on"] = read_on
+    if read_off != [commands[1]]:
+        chosen["read_off"] = read_off
+    draft.fields["words"] = chosen
     return True

@@ -48,8 +48,9 @@ def import_ha(data: Any, source: str) -> Import:
     if not hubs:
         where = data.where if isinstance(data, Node) else Where(source, 1)
         result.note(where, "modbus", "no modbus hub found")
+    names: set[str] = set()
     for hub in hubs:
-        convert_hub(hub, result)
+        convert_hub(hub, result, names)
     return result
 
 
@@ -82,8 +83,10 @@ def find_hubs(data: Any, result: Import) -> list[Node]:
     return hubs
 
 
-def convert_hub(hub: Node, result: Import) -> None:
-    """One hub: its bus, and a device per unit its entities address."""
+def convert_hub(hub: Node, result: Import, names: set[str]) -> None:
+    """One hub: its bus, and a device per unit its entities address. ``names``: the
+    ``<platform>.<name>`` of the entities of the hubs before; Home Assistant loads only the
+    first entity of a name on a platform, across hubs, and so does the import."""
     name = str(hub.get("name", DEFAULT_HUB))
     bus = _bus(hub, name, result)
     for key in hub:
@@ -97,6 +100,9 @@ def convert_hub(hub: Node, result: Import) -> None:
                 result.note(node.where, entity, f"its hub {name!r} is not converted")
             elif kind in _NOT_CONVERTED:
                 result.note(node.where, f"{node.get('name', kind)}", _NOT_CONVERTED[kind])
+            elif f"{kind}.{node.get('name')}" in names:
+                reason = f"a second {kind[:-1]} of this name: Home Assistant loads the first only"
+                result.note(node.where, str(node.get("name")), reason)
             elif result.entities >= MAX_ENTITIES:
                 result.note(node.where, kind, f"more than {MAX_ENTITIES} entities: not converted")
             else:
@@ -107,6 +113,7 @@ def convert_hub(hub: Node, result: Import) -> None:
                         f"a {kind[:-1]} becomes a switch (switch.<id>, not {kind[:-1]}.<id>)",
                         partly=True,
                     )
+                names.add(f"{kind}.{node.get('name')}")
                 drafts = _CONVERTERS[kind](node, result)
                 result.entities += len(drafts)
                 unit = node.get("slave", node.get("device_address", 0))

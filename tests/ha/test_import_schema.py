@@ -4,8 +4,10 @@ the version under test): each config it accepts converts with each entity accoun
 converted (a mapping entity of that name) or named in the report.
 
 The configs: Home Assistant's fixtures (tests/components/modbus/fixtures), its sensor
-decode table (test_sensor.py, see tests/importer/data/ha_sensor_values.yaml) and this
-project's whole-configuration and every-key examples (tests/importer/test_ha_modbus.py).
+decode table (test_sensor.py, see tests/importer/data/ha_sensor_values.yaml), the configs
+of its test_binary_sensor, test_switch, test_fan, test_light, test_climate, test_cover and
+test_init (tests/importer/data/ha_tests/), and this project's whole-configuration,
+every-key and shaping examples (tests/importer/test_ha_modbus.py).
 """
 
 from __future__ import annotations
@@ -19,12 +21,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 
 from bridge.importer.ha_modbus import import_ha
 from bridge.importer.source import load_source
 from tests.ha.conftest import HA_CACHE
 from tests.ha.homeassistant import CLEAN_ENV
-from tests.importer.test_ha_modbus import CASES, DATA, EVERY_KEY, WHOLE, hub_with
+from tests.importer.test_ha_modbus import CASES, DATA, EVERY_KEY, SHAPED, WHOLE, hub_with
+from tests.importer.test_ha_tests import configs as ha_test_configs
+from tests.importer.test_ha_tests import hub_of
 
 SCRIPT = """\
 import json, pathlib, sys
@@ -49,7 +54,12 @@ print(json.dumps(answer))
 
 def configs() -> dict[str, str]:
     texts = {f"fixture_{p.name}": p.read_text() for p in (DATA / "ha_fixtures").glob("*.yaml")}
-    texts |= {"whole.yaml": WHOLE, "every_key.yaml": EVERY_KEY}
+    texts |= {"whole.yaml": WHOLE, "every_key.yaml": EVERY_KEY, "shaped.yaml": SHAPED}
+    valid = [line for line in SHAPED.splitlines() if "zero_suppress: -1" not in line]
+    texts["shaped_valid.yaml"] = "\n".join(valid) + "\n"  # HA refuses a negative one
+    for test, config in ha_test_configs():
+        name = test.replace("::", "-").replace("[", "_").replace("]", "")
+        texts[f"{name}.yaml"] = yaml.safe_dump({"modbus": [hub_of(config)]}, sort_keys=False)
     current = [
         line for line in EVERY_KEY.splitlines() if "retries" not in line and "lazy" not in line
     ]
@@ -113,3 +123,7 @@ def test_every_config_home_assistant_accepts_converts_with_each_entity_accounted
     assert {"whole.yaml", "fixture_configuration.yaml", "fixture_configuration_2.yaml"} <= set(
         accepted
     )
+    tests = {name for name in texts if name.startswith("test_")}
+    gone = {f"test_cover-test_config_cover_{n}.yaml" for n in (1, 2)}  # lazy_error_count
+    assert set(refused) & tests == {n for n in tests if "exception_struct" in n} | gone
+    assert "shaped_valid.yaml" in accepted  # min_value/max_value/zero_suppress, switch words

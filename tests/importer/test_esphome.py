@@ -184,3 +184,32 @@ select:
     assert main(["import", "esphome", str(path), "--out", str(out)]) == 0
     loaded = load_config(out / "config.yaml")
     assert sorted(loaded.mappings["sdm"].entities) == ["mode", "power", "set_point"]
+
+
+def test_entities_inside_a_controller_are_reported_with_where_they_belong(tmp_path: Path) -> None:
+    """ESPHome's modbus_controller schema has no entity keys (esphome/components/
+    modbus_controller/__init__.py): a node with them does not compile, so nothing is guessed."""
+    path = tmp_path / "node.yaml"
+    path.write_text(
+        """\
+esphome: {name: meter}
+uart: {baud_rate: 9600}
+modbus: {id: bus}
+modbus_controller:
+  - id: sdm
+    address: 2
+    sensors:
+      - {name: Voltage, address: 0, register_type: read, value_type: FP32}
+    switch:
+      - {name: Relay, address: 1, register_type: coil}
+sensor:
+  - {platform: modbus_controller, name: Power, address: 12, register_type: read,
+     value_type: FP32}
+""",
+        encoding="utf-8",
+    )
+    result = import_esphome(load_source(path), "node.yaml")
+    assert sorted(result.devices[0].mapping["entities"]) == ["power"]
+    inline = [(n.where.line, n.key, n.partly) for n in result.notes if "inside" in n.reason]
+    assert inline == [(7, "sdm.sensors", False), (9, "sdm.switch", False)]
+    assert "- platform: modbus_controller" in result.notes[-1].reason

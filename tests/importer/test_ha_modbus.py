@@ -204,6 +204,7 @@ def test_a_whole_configuration_becomes_buses_devices_and_mappings(tmp_path: Path
         "type": "bool",
         "write_function": 6,
         "access": "rw",
+        "words": {"write_on": 1, "write_off": 0},  # 2 reads unknown, as Home Assistant's verify
         "poll": "fast",
         "ha": {"entity_id": "export_limit", "component": "switch"},
     }
@@ -230,15 +231,12 @@ def test_every_key_left_out_is_reported_with_its_line(tmp_path: Path) -> None:
         (7, "hub.retries", False),
         (12, "Energy.data_type", False),
         (18, "Power.lazy_error_count", False),
-        (17, "Power.min_value", False),
-        (16, "Power.zero_suppress", False),
-        (20, "Mode.command_on", False),
         (22, "Room", False),
         (24, "Shutter", False),
         (26, "far.type", False),
         (30, "Lost", False),
     ]
-    assert list(result.devices[0].mapping["entities"]) == ["power"]
+    assert list(result.devices[0].mapping["entities"]) == ["power", "mode"]
 
 
 def test_unit_0_is_written_disabled_and_reported(tmp_path: Path) -> None:
@@ -264,3 +262,52 @@ def test_the_number_of_entities_is_bounded(tmp_path: Path, monkeypatch: pytest.M
     result = convert(tmp_path, yaml.safe_dump({"modbus": [hub]}))
     assert list(result.devices[0].mapping["entities"]) == ["s0", "s1", "s2"]
     assert [n.reason for n in result.notes] == ["more than 3 entities: not converted"] * 2
+
+
+SHAPED = """\
+modbus:
+  - name: hub
+    type: tcp
+    host: 127.0.0.1
+    port: 502
+    sensors:
+      - {name: Flow, address: 1, slave: 1, scale: 0.1, min_value: "-5", max_value: 50,
+         zero_suppress: 0.5}
+      - {name: Label, address: 2, slave: 1, data_type: string, count: 2, min_value: 1}
+      - {name: Odd, address: 4, slave: 1, zero_suppress: -1}
+    switches:
+      - {name: Relay, address: 9, slave: 1, command_on: 0x0100, command_off: 0x0200,
+         verify: {state_on: [0x0100, 0x0101], state_off: 0x0200}}
+      - {name: Mode, address: 10, slave: 1, command_on: 0xFF, command_off: 0}
+      - {name: Same, address: 11, slave: 1, command_on: 3, command_off: 3}
+      - {name: Coil, address: 12, slave: 1, write_type: coil, command_on: 0, command_off: 1}
+      - {name: Big, address: 13, slave: 1, command_on: 0x10000}
+      - {name: Both, address: 14, slave: 1, verify: {state_on: [1, 2], state_off: [0, 2]}}
+"""
+
+
+def test_clamp_zero_suppress_and_a_switchs_words_are_converted(tmp_path: Path) -> None:
+    result = convert(tmp_path, SHAPED)
+    entities = only_mapping(result).model_dump()["entities"]
+    flow = entities["flow"]
+    assert (flow["clamp"], flow["zero_suppress"]) == ({"min": -5.0, "max": 50.0}, 0.5)
+    assert entities["relay"]["words"] == {
+        "write_on": 0x0100,
+        "write_off": 0x0200,
+        "read_on": (0x0100, 0x0101),
+        "read_off": None,
+    }
+    assert (entities["mode"]["access"], entities["mode"]["words"]["write_on"]) == ("w", 0xFF)
+    # a word in both lists reads on, as Home Assistant looks in state_on first: off is 0 only
+    assert (entities["both"]["words"]["read_on"], entities["both"]["words"]["read_off"]) == (
+        (1, 2),
+        None,
+    )
+    assert sorted(entities) == ["both", "flow", "mode", "relay"]
+    assert [(n.where.line, n.key) for n in result.notes] == [
+        (9, "Label.min_value"),
+        (10, "Odd.zero_suppress"),
+        (15, "Same.command_on"),
+        (16, "Coil.command_on"),
+        (17, "Big.command_on"),
+    ]

@@ -173,6 +173,21 @@ def test_an_entity_asks_for_its_own_entity_id_when_it_names_one() -> None:
     assert (shown["platform"], shown["default_entity_id"]) == ("sensor", "sensor.setpoint")
 
 
+def test_a_switch_with_its_own_words_is_discovered_as_any_switch() -> None:
+    """``words`` are what the bridge writes and reads on the wire: Home Assistant still
+    sends ON/OFF and reads true/false, so the payload is the plain switch's, whole."""
+    plain = {"type": "bool", "access": "rw"}
+    worded = plain | {"words": {"write_on": 0x0100, "write_off": 0x0200, "read_on": [0x0100, 3]}}
+    payload = _one(worded)
+    assert payload == _one(plain)
+    assert payload is not None
+    assert (payload["platform"], payload["payload_on"], payload["payload_off"]) == (
+        "switch",
+        "ON",
+        "OFF",
+    )
+
+
 # --- read-only platforms ------------------------------------------------------------------
 
 

@@ -23,6 +23,7 @@ from bridge.core.simulation_behaviour import (
     start_image,
 )
 from bridge.errors import ValueRejectedError
+from tests.factory import make_mapping
 
 
 class Device:
@@ -243,3 +244,26 @@ def test_alarm_history_slots_hold_different_alarms() -> None:
     slots = [pump.value(f"alarm_history_{n}") for n in range(1, 9)]
     assert None not in slots
     assert len(set(slots)) == 8
+
+
+def test_a_run_switch_with_its_own_words_starts_and_stops_the_device() -> None:
+    """A switch that writes 0x0100/0x0200 (``words``) runs the device on its ON word only."""
+    mapping = make_mapping(
+        {
+            "run": {"name": "Run", "address": 0, "type": "bool", "access": "rw"}
+            | {"words": {"write_on": 0x0100, "write_off": 0x0200}},
+            "status": {"name": "Status", "address": 1, "enum": {0: "stopped", 1: "running"}},
+        },
+        status="status",
+    )
+    points = mapping.points()
+    image = initial_image(mapping, points)
+    behaviour = build_behaviour(mapping, points, image)
+    for command, status in (("OFF", "stopped"), ("ON", "running"), ("OFF", "stopped")):
+        for write in encode(points["run"], command, image):
+            image = image | stored_cells(write)
+            image |= follow(behaviour, write, image)
+        assert (decode(points["run"], image), decode(points["status"], image)) == (
+            command == "ON",
+            status,
+        )
