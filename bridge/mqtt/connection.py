@@ -40,12 +40,15 @@ import logging
 import socket
 import ssl
 import time
-from typing import Any
+from collections import deque
+from typing import Any, Literal
 from urllib.parse import urlsplit
 
 import aiomqtt
 import paho.mqtt.client as paho
 from aiomqtt.exceptions import MqttConnectError as _RefusedByBroker
+from paho.mqtt.client import DISCONNECT, PUBLISH
+from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
@@ -59,6 +62,10 @@ FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
 
 _log = logging.getLogger(__name__)
+_PLAIN_ACKS = {  # PUBACK reason codes told with a shared value: success, no subscribers
+    code: ReasonCode(PacketTypes.PUBACK, identifier=code) for code in (0x00, 0x10)
+}
+_NO_PROPERTIES = Properties(PacketTypes.PUBACK)  # type: ignore[no-untyped-call]
 
 
 class Received(aiomqtt.Message):
@@ -107,6 +114,26 @@ class Connection(aiomqtt.Client):
         self.watchers: dict[str, asyncio.Queue[Received]] = {}  # by exact topic, live too
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
         self.reached = False  # the socket (and TLS) connected and CONNECT was sent
+        self._client._handle_pubackcomp = self._acknowledgement  # type: ignore[method-assign,assignment]
+
+    def _acknowledgement(self, kind: Literal["PUBACK", "PUBCOMP"]) -> MQTTErrorCode:
+        """paho's PUBACK/PUBCOMP handling, but a PUBACK without properties that says
+        success or no matching subscribers (what brokers send for nearly every publish: the
+        packet identifier, on MQTT 5 perhaps with the reason code) is told to
+        ``on_publish`` with a shared reason code and no properties instead of two reason
+        codes and a properties object made for each (issue 27)."""
+        client = self._client
+        packet = client._in_packet["packet"]
+        if kind != "PUBACK" or len(packet) not in (2, 3):
+            return paho.Client._handle_pubackcomp(client, kind)
+        reason = _PLAIN_ACKS.get(packet[2] if len(packet) == 3 else 0)
+        if reason is None or (len(packet) == 3 and client._protocol != paho.MQTTv5):
+            return paho.Client._handle_pubackcomp(client, kind)
+        mid = int.from_bytes(packet[:2], "big")
+        with client._out_message_mutex:
+            if mid in client._out_messages:
+                return client._do_on_publish(mid, reason, _NO_PROPERTIES)
+        return MQTTErrorCode.MQTT_ERR_SUCCESS
 
     def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
         """The socket (and TLS) connected; paho sends the CONNECT next. Marked here, in the
@@ -175,6 +202,7 @@ class Connection(aiomqtt.Client):
 
         def write() -> None:
             try:
+                coalesce(client._out_packet)
                 client.loop_write()
             except OSError as exc:  # the connection broke: the session ends
                 if not self._disconnected.done():
@@ -251,6 +279,33 @@ class Connection(aiomqtt.Client):
                     future.set_exception(aiomqtt.MqttError("connection lost"))
 
         self._disconnected.add_done_callback(wake)
+
+
+def coalesce(queue: deque[Any]) -> None:
+    """Join the packets at the head of paho's out queue that need nothing done once
+    written (every packet but a QoS 0 PUBLISH, whose ``on_publish`` paho calls then, and
+    DISCONNECT, after which it closes) into one, so that one ``send()`` carries a burst:
+    paho sends each packet on its own, a system call and a TCP segment per message."""
+    count = 0
+    for packet in queue:
+        if not _inert(packet):
+            break
+        count += 1
+    if count < 2:
+        return
+    parts = []
+    for _ in range(count):
+        packet = queue.popleft()
+        parts.append(bytes(packet["packet"][packet["pos"] :]))
+    joined = b"".join(parts)
+    # command 0 (reserved): paho's _packet_write has nothing to do once it is written
+    joined_packet = {"command": 0, "mid": 0, "qos": 0, "pos": 0, "info": None}
+    queue.appendleft(joined_packet | {"to_process": len(joined), "packet": joined})
+
+
+def _inert(packet: dict[str, Any]) -> bool:
+    kind = packet["command"] & 0xF0
+    return not (kind == PUBLISH and packet["qos"] == 0) and kind != DISCONNECT
 
 
 async def connect(
