@@ -174,11 +174,15 @@ def shown_readings(
     """The values read that a discovery payload must admit, by key: an enum code the
     mapping has no label for (an option), a writable number outside its limits or below
     its ``dangerous_below`` (the number's range)."""
-    return {
-        key: values.get(key)
-        for key, point in points.items()
-        if is_unknown_code(point.entity, values.get(key)) or _beyond(point, values.get(key), image)
-    }
+    shown: dict[str, Value] = {}
+    for key, point in points.items():
+        entity = point.entity
+        if entity.enum is None and not (entity.writable and entity.kind == "number"):
+            continue  # neither an unknown code nor a number beyond its range can come
+        value = values.get(key)
+        if is_unknown_code(entity, value) or _beyond(point, value, image):
+            shown[key] = value
+    return shown
 
 
 def admitted(

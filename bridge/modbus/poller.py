@@ -225,7 +225,7 @@ class DevicePoller:
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
-        keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
+        keys = self.state.keys_of(chosen)
         await check_torn(self.state, self.link, keys, plan, fresh)
         self._decode(keys, fresh)
         if not self.first_poll_done and set(PollClass) <= chosen:
