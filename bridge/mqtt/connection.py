@@ -88,15 +88,25 @@ class Received(aiomqtt.Message):
 class Acknowledgements(asyncio.Event):
     """The acknowledgements a burst of publishes waits for, as one event: it stands in
     aiomqtt's ``_pending_publishes`` for each message, whose ``_on_publish`` (and
-    ``wake_on_loss``) call ``set()`` once per message; it is set when none is due."""
+    ``wake_on_loss``) call ``set()`` once per message; it is set when none is due.
+    ``stalled`` is the longest the broker acknowledged none of them (from ``start()``)."""
 
     def __init__(self) -> None:
         super().__init__()
         self.mids: list[int] = []
         self.due = 0
+        self.stalled = 0.0
+        self._last = 0.0
+
+    def start(self) -> None:
+        """The burst is handed over: the broker's time begins."""
+        self._last = time.monotonic()
 
     def set(self) -> None:
         self.due -= 1
+        now = time.monotonic()
+        self.stalled = max(self.stalled, now - self._last)
+        self._last = now
         if self.due <= 0:
             super().set()
 
@@ -230,13 +240,19 @@ class Connection(aiomqtt.Client):
 
     async def acknowledged(self, acks: Acknowledgements) -> None:
         """Wait until the broker acknowledged every publish of ``acks`` (or the connection
-        was lost); aiomqtt.MqttError if that took longer than ``TIMEOUT``."""
+        was lost); aiomqtt.MqttError if it acknowledged none of them for ``TIMEOUT``
+        seconds. A broker that keeps acknowledging, however slowly (paho keeps 20 publishes
+        in flight), is waited for: a long burst to a slow broker is no lost connection."""
         try:
-            if acks.due > 0 and not self.lost:  # else woken already, or never
-                async with asyncio.timeout(self.timeout):
-                    await acks.wait()
-        except TimeoutError:
-            raise aiomqtt.MqttError("Operation timed out") from None
+            acks.start()
+            while acks.due > 0 and not self.lost:  # else woken already, or never
+                due = acks.due
+                try:
+                    async with asyncio.timeout(self.timeout):
+                        await acks.wait()
+                except TimeoutError:
+                    if acks.due >= due:  # not one acknowledgement in all that time
+                        raise aiomqtt.MqttError("Operation timed out") from None
         finally:
             for mid in acks.mids:  # acknowledged ones are gone already
                 if self._pending_publishes.get(mid) is acks:

@@ -74,14 +74,16 @@ class Relay:
 
         passed = 0
         pending = b""
+        last = 0.0  # when the chunk before is due: none overtakes another when delay drops
         while chunk := await reader.read(65536):
             if self.hold:
                 continue
             if self._dropping or pending:  # whole packets only, while one is looked for
                 packets, pending = _split(pending + chunk)
                 chunk = b"".join(p for p in packets if not self._unanswered(p))
-            if self.delay:
-                loop.call_later(self.delay, write, chunk)
+            if self.delay or last > loop.time():
+                last = max(loop.time() + self.delay, last + 1e-6)
+                loop.call_at(last, write, chunk)
             else:
                 write(chunk)
             passed += 1
