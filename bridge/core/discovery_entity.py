@@ -168,12 +168,23 @@ def component_config(key: str, entity: Entity, context: ComponentContext) -> Con
     return config
 
 
+def admittable(points: AnyMapping[str, Point]) -> dict[str, Point]:
+    """The points whose readings a discovery payload may have to admit: enums (a code
+    without a label) and writable numbers (a reading beyond the range offered)."""
+    return {
+        key: point
+        for key, point in points.items()
+        if point.entity.enum is not None
+        or (point.entity.writable and point.entity.kind == "number")
+    }
+
+
 def shown_readings(
     points: AnyMapping[str, Point], values: AnyMapping[str, Value], image: Image
 ) -> dict[str, Value]:
     """The values read that a discovery payload must admit, by key: an enum code the
     mapping has no label for (an option), a writable number outside its limits or below
-    its ``dangerous_below`` (the number's range)."""
+    its ``dangerous_below`` (the number's range). ``points`` may be ``admittable``'s."""
     shown: dict[str, Value] = {}
     for key, point in points.items():
         entity = point.entity
