@@ -40,7 +40,8 @@ its last poll of unit 1). All of it takes about 7 minutes; ``--keep DIR`` keeps 
 run's configs and logs (bridge, device, relay requests, MQTT messages seen).
 
     .venv/bin/python bench/peers.py [--seconds 30] [--commands 20] [--latency 0.02]
-                                    [--only bridge|modbus4mqtt|modbus2mqtt] [--keep DIR]
+                                    [--only bridge|bridge-values|modbus4mqtt|modbus2mqtt]...
+                                    [--keep DIR]
 """
 
 from __future__ import annotations
@@ -367,7 +368,7 @@ def quiet_lost_sessions(loop: asyncio.AbstractEventLoop, context: dict[str, Any]
 
 async def main(args: argparse.Namespace) -> None:
     asyncio.get_running_loop().set_exception_handler(quiet_lost_sessions)
-    kinds = [k for k in KINDS if args.only in (None, k.name)]
+    kinds = [k for k in KINDS if args.only is None or k.name in args.only]
     for kind in kinds:
         kind.prepare()
     figures = {}
@@ -392,7 +393,9 @@ def parse(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--seconds", type=float, default=30.0, help="measuring window")
     parser.add_argument("--commands", type=int, default=20)
     parser.add_argument("--latency", type=float, default=0.02, help="seconds per transaction")
-    parser.add_argument("--only", choices=[k.name for k in KINDS])
+    parser.add_argument(
+        "--only", choices=[k.name for k in KINDS], action="append", help="this kind (repeatable)"
+    )
     parser.add_argument("--keep", type=Path, help="keep each run's configs and logs here")
     return parser.parse_args(argv)
 

@@ -23,7 +23,8 @@ should make over the requests it made in ``<base>/bridge/health`` (every 10 s).
 has it) and ``--case`` keeps only the case of that label.
 
     .venv/bin/python bench/scale.py [seconds] [warm-up seconds] [--output both] [--case TEXT]
-    .venv/bin/python bench/scale.py profile [seconds]   # where the CPU goes (50 devices)
+    .venv/bin/python bench/scale.py profile [seconds] [--output both] [--case TEXT]
+        # where the CPU goes (50 devices, one gateway, settings 60 s, unless --case)
 """
 
 from __future__ import annotations
@@ -279,33 +280,46 @@ async def run_case(  # noqa: PLR0917 - the bench's own helper
             broker.stop()
 
 
-async def profile(seconds: float) -> None:
-    """Run the bridge of ``PROFILED`` under cProfile; print where its CPU time goes."""
-    label, units, ports, slow = PROFILED
+async def profile(seconds: float, output: str, case: str) -> None:
+    """Run the bridge of ``PROFILED`` (or the case labelled ``case``) under cProfile with
+    ``mqtt.output`` at ``output``; print where its CPU time goes, by area and by function."""
+    label, units, ports, slow = next((c for c in CASES if c[0] == case), PROFILED)
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
         broker = Broker(folder)
         broker.start()
         try:
             poll = {"fast": PERIOD, "slow": slow}
-            async with bridge_process(folder, broker.url, units, ports, poll, folder / "p"):
+            async with bridge_process(
+                folder, broker.url, units, ports, poll, folder / "p", output
+            ):
                 await asyncio.sleep(seconds)
         finally:
             broker.stop()
         stats = pstats.Stats(str(folder / "p")).stats  # type: ignore[attr-defined]
     areas: collections.Counter[str] = collections.Counter()
     modules: collections.Counter[str] = collections.Counter()
-    for (file, _, function), (_, _, own, _, _) in stats.items():
+    functions: collections.Counter[str] = collections.Counter()
+    for (file, line, function), (_, _, own, _, _) in stats.items():
         if "select.epoll" not in function:  # waiting for I/O: idle
             areas[_area(file, function)] += own
+            where = file.rsplit("-packages/", maxsplit=1)[-1].rsplit("/bridge/", maxsplit=1)[-1]
+            functions[f"{where}:{line} {function}"] += own
         if "/bridge/" in file:
             modules["bridge/" + file.rsplit("/bridge/", maxsplit=1)[-1]] += own
     busy = sum(areas.values())
-    print(f"{label}: {seconds:g} s under cProfile (start-up included), {busy:.1f} s busy\n")
+    print(
+        f"{label}, mqtt.output: {output}: {seconds:g} s under cProfile (start-up included), "
+        f"{busy:.1f} s busy\n"
+    )
     print("| where | s | % of busy |")
     print("| --- | ---: | ---: |")
     for area, own in [*areas.most_common(), *modules.most_common(6)]:
         print(f"| {area} | {own:.2f} | {100 * own / busy:.1f} |")
+    print("\n| function (own time) | s | % of busy |")
+    print("| --- | ---: | ---: |")
+    for function, own in functions.most_common(25):
+        print(f"| {function} | {own:.2f} | {100 * own / busy:.1f} |")
 
 
 def _area(file: str, function: str) -> str:
@@ -371,13 +385,16 @@ async def main(seconds: float, warmup: float, output: str, case: str) -> None:
 if __name__ == "__main__":
     if sys.argv[1:2] == ["serve"]:
         asyncio.run(serve(int(sys.argv[2]), [int(p) for p in sys.argv[3:]]))
-    elif sys.argv[1:2] == ["profile"]:
-        asyncio.run(profile(float(sys.argv[2]) if len(sys.argv) > 2 else 60.0))
     else:
+        profiling = sys.argv[1:2] == ["profile"]
         parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
         parser.add_argument("seconds", type=float, nargs="?", default=60.0)
-        parser.add_argument("warmup", type=float, nargs="?", default=20.0)
+        if not profiling:
+            parser.add_argument("warmup", type=float, nargs="?", default=20.0)
         parser.add_argument("--output", choices=("json", "values", "both"), default="json")
         parser.add_argument("--case", default="", help="only the case of this label")
-        a = parser.parse_args()
-        asyncio.run(main(a.seconds, a.warmup, a.output, a.case))
+        a = parser.parse_args(sys.argv[2:] if profiling else sys.argv[1:])
+        if profiling:
+            asyncio.run(profile(a.seconds, a.output, a.case))
+        else:
+            asyncio.run(main(a.seconds, a.warmup, a.output, a.case))

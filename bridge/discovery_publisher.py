@@ -29,9 +29,11 @@ import contextlib
 import itertools
 import json
 import logging
+import weakref
 
 from bridge.config import LoadedConfig
 from bridge.core.codec import Value, limits_of, unit_of
+from bridge.core.device_state import DeviceState
 from bridge.core.discovery import (
     DeviceInfo,
     Origin,
@@ -40,8 +42,9 @@ from bridge.core.discovery import (
     build_discovery,
     removal,
 )
-from bridge.core.discovery_entity import admitted, shown_readings
+from bridge.core.discovery_entity import admittable, admitted, shown_readings
 from bridge.core.entity import PollClass
+from bridge.core.mapping import Point
 from bridge.core.topics import Topics
 from bridge.errors import MissingDataError
 from bridge.modbus.engine import Engine
@@ -71,6 +74,10 @@ class DiscoveryPublisher:
         # the stale configs were swept this run: only a start (or a reload) leaves any, and
         # the sweep is a retained read, seconds on a cluster after a node failure
         self.swept = False
+        # per device state (so per set of points): its sources and its admittable points
+        self._facts: weakref.WeakKeyDictionary[
+            DeviceState, tuple[frozenset[str], dict[str, Point]]
+        ] = weakref.WeakKeyDictionary()
 
     def forget(self, device_id: str) -> None:
         """Build the device's discovery afresh next time (its mapping changed), and sweep
@@ -88,9 +95,22 @@ class DiscoveryPublisher:
         sent = self._readings.get(poller.device.id, {})
         return not admitted(poller.points, sent, self._shown(poller), poller.image)
 
-    @staticmethod
-    def _shown(poller: DevicePoller) -> dict[str, Value]:
-        return shown_readings(poller.points, poller.values, poller.image)
+    def _shown(self, poller: DevicePoller) -> dict[str, Value]:
+        return shown_readings(self._known(poller)[1], poller.values, poller.image)
+
+    def _known(self, poller: DevicePoller) -> tuple[frozenset[str], dict[str, Point]]:
+        """The device's sources and admittable points, worked out once per set of points
+        (every flush asks: issue 27)."""
+        facts = self._facts.get(poller.state)
+        if facts is None:
+            sources = frozenset(
+                source.key
+                for point in poller.points.values()
+                for source in (point.unit_source, point.min_source, point.max_source)
+                if source is not None
+            )
+            facts = self._facts[poller.state] = (sources, admittable(poller.points))
+        return facts
 
     def ready(self, poller: DevicePoller) -> bool:
         """True when the device's discovery has what it depends on (or depends on nothing)."""
@@ -124,15 +144,9 @@ class DiscoveryPublisher:
             slow_interval=poller.intervals[PollClass.SLOW],
         )
 
-    @staticmethod
-    def sources(poller: DevicePoller) -> set[str]:
+    def sources(self, poller: DevicePoller) -> frozenset[str]:
         """Keys whose value changes a discovery payload (units and limits from registers)."""
-        sources: set[str] = set()
-        for point in poller.points.values():
-            for source in (point.unit_source, point.min_source, point.max_source):
-                if source is not None:
-                    sources.add(source.key)
-        return sources
+        return self._known(poller)[0]
 
     def discovery_for(self, poller: DevicePoller) -> list[Publish]:
         units, limits = {}, {}

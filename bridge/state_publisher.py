@@ -33,7 +33,7 @@ from bridge.config import MqttConfig
 from bridge.core.alarm_events import alarm_events, event_document, reported
 from bridge.core.discovery import Publish
 from bridge.core.discovery_alarms import alarm_names
-from bridge.core.state import compact, plain_payload, published, state_document
+from bridge.core.state import compact, plain_payload, state_document
 from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.modbus.engine import Engine
@@ -229,7 +229,7 @@ class StatePublisher:
         self._availability.clear()
         burst: list[Outgoing] = []
         for poller in self.engine.devices.values():
-            self._device_messages(poller, set(published(poller.points)), burst)
+            self._device_messages(poller, set(poller.state.published), burst)
         burst.append((self.topics.bridge_devices, self._devices_list(), True))
         if with_info:
             burst.append((self.topics.bridge_info, self.info(), True))
@@ -251,7 +251,7 @@ class StatePublisher:
             )
             burst.append((topics.device(device_id), compact(document), True))
         if output != "json":
-            for key in sorted(keys & set(published(poller.points))):
+            for key in sorted(keys & poller.state.published):
                 payload = plain_payload(poller.values.get(key))
                 burst.append((topics.value(device_id, key), payload, True))
         # online once it answered and its values are out, offline once it stopped

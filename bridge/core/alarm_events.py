@@ -63,11 +63,12 @@ def alarm_events(
 ) -> tuple[list[AlarmEvent], frozenset[str]]:
     """The transitions from the alarms ``before`` to those ``values`` say are active, and
     the alarms to remember (those of entities without a value stay as they were)."""
-    active = set(active_alarms(points, values))
+    said = active_alarms(points, values)
+    active = set(said)
     owners = {name: owner for name in before | active if (owner := _owner(name, points))}
     known = {name for name, key in owners.items() if values.get(key) is not None}
     cleared = sorted((before & known) - active)
-    raised = [name for name in active_alarms(points, values) if name not in before]
+    raised = [name for name in said if name not in before]
     events = [_event(n, False, owners[n], points) for n in cleared]
     events += [_event(n, True, owners[n], points) for n in raised]
     return events, frozenset((before - set(cleared)) | active)

@@ -35,6 +35,7 @@ from bridge.core.planner import Address, ReadLimits, addresses_of, limits_for, p
 from bridge.core.protocol import Protocol
 from bridge.core.refusal_memory import RefusalMemory
 from bridge.core.request import Read, Write
+from bridge.core.state import published
 from bridge.core.timing import LinkTiming
 from bridge.core.write_plan import stored
 from bridge.errors import MissingDataError
@@ -75,6 +76,8 @@ class DeviceState:
         self.refusals = RefusalMemory(recheck)
         self.max_read: int | None = None  # learnt: fewer registers per read than mapped
         self._plans: dict[PollClass, tuple[Read, ...]] = {}
+        self._keys: dict[frozenset[PollClass], tuple[str, ...]] = {}
+        self.published = frozenset(published(self.points))  # keys whose values go out
         self._limits: ReadLimits | None = None
 
     # --- plans -------------------------------------------------------------------------
@@ -104,6 +107,15 @@ class DeviceState:
                 self._plans[poll_class] = plan_reads(members, self.limits()).reads
             reads.extend(self._plans[poll_class])
         return tuple(reads)
+
+    def keys_of(self, classes: Iterable[PollClass]) -> tuple[str, ...]:
+        """The keys of the points of these poll classes, in mapping order."""
+        chosen = frozenset(classes)
+        if chosen not in self._keys:
+            self._keys[chosen] = tuple(
+                k for k, p in self.points.items() if p.entity.poll_class in chosen
+            )
+        return self._keys[chosen]
 
     def reads_for(self, points: Iterable[Point]) -> tuple[Read, ...]:
         """The reads of these points (not kept: a read on request, a read back)."""
@@ -145,8 +157,8 @@ class DeviceState:
             point = self.points[key]
             if not point.entity.readable:
                 continue
-            span = {(point.table, a) for a in point.span}
-            if span & refused:
+            span = point.addresses
+            if not span.isdisjoint(refused):
                 value: Value = None
             elif span <= fresh:
                 try:

@@ -175,17 +175,32 @@ def component_config(key: str, entity: Entity, context: ComponentContext) -> Con
     return config
 
 
+def admittable(points: AnyMapping[str, Point]) -> dict[str, Point]:
+    """The points whose readings a discovery payload may have to admit: enums (a code
+    without a label) and writable numbers (a reading beyond the range offered)."""
+    return {
+        key: point
+        for key, point in points.items()
+        if point.entity.enum is not None
+        or (point.entity.writable and point.entity.kind == "number")
+    }
+
+
 def shown_readings(
     points: AnyMapping[str, Point], values: AnyMapping[str, Value], image: Image
 ) -> dict[str, Value]:
     """The values read that a discovery payload must admit, by key: an enum code the
     mapping has no label for (an option), a writable number outside its limits or below
-    its ``dangerous_below`` (the number's range)."""
-    return {
-        key: values.get(key)
-        for key, point in points.items()
-        if is_unknown_code(point.entity, values.get(key)) or _beyond(point, values.get(key), image)
-    }
+    its ``dangerous_below`` (the number's range). ``points`` may be ``admittable``'s."""
+    shown: dict[str, Value] = {}
+    for key, point in points.items():
+        entity = point.entity
+        if entity.enum is None and not (entity.writable and entity.kind == "number"):
+            continue  # neither an unknown code nor a number beyond its range can come
+        value = values.get(key)
+        if is_unknown_code(entity, value) or _beyond(point, value, image):
+            shown[key] = value
+    return shown
 
 
 def admitted(

@@ -136,6 +136,12 @@ class Point:
     min_source: Point | None = field(default=None, repr=False)
     max_source: Point | None = field(default=None, repr=False)
     state_source: Point | None = field(default=None, repr=False)  # what a toggle flips
+    # (table, wire address) of each register: worked out once, asked at every decode
+    addresses: frozenset[tuple[Table, int]] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        span = range(self.address, self.address + self.entity.register_count)
+        object.__setattr__(self, "addresses", frozenset((self.entity.table, a) for a in span))
 
     @property
     def table(self) -> Table:

@@ -34,7 +34,7 @@ def active_alarms(points: AnyMapping[str, Point], values: AnyMapping[str, Value]
     """Names of the alarms active in ``values``, in mapping order."""
     names: list[str] = []
     for key, point in points.items():
-        if key in values and alarm_active(point, values[key]):
+        if point.entity.alarm and key in values and alarm_active(point, values[key]):
             value = values[key]
             if not isinstance(value, str):
                 names.append(key)
@@ -65,11 +65,12 @@ def state_document(
     last_reset: AnyMapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """The JSON object published on ``<base>/<device>``."""
-    document: dict[str, Any] = {key: values.get(key) for key in published(points)}
+    keys = published(points)
+    document: dict[str, Any] = {key: values.get(key) for key in keys}
     if mapping.status is not None and mapping.status in points:
         document["status"] = values.get(mapping.status)
     document["alarms"] = active_alarms(points, values)
-    resetting = [k for k in published(points) if points[k].entity.ha.state_class == "total"]
+    resetting = [k for k in keys if points[k].entity.ha.state_class == "total"]
     if resetting:
         last_reset = last_reset or {}
         document["last_reset"] = {k: last_reset.get(k, NEVER_RESET) for k in resetting}

@@ -225,7 +225,7 @@ class DevicePoller:
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
-        keys = [k for k, p in self.points.items() if p.entity.poll_class in chosen]
+        keys = self.state.keys_of(chosen)
         await check_torn(self.state, self.link, keys, plan, fresh)
         self._decode(keys, fresh)
         if not self.first_poll_done and set(PollClass) <= chosen:
@@ -370,5 +370,10 @@ def _with_overrides(mapping: Mapping, device: DeviceConfig) -> Mapping:
     overrides.pop("response_timeout", None)
     if not overrides:
         return mapping
+    # one copy for every device of the model with the same overrides, as every device
+    # without overrides shares the mapping: its points, guard and read limits are worked
+    # out once (a copy of its own per device made 247 Nastec units work out their
+    # reserved registers 247 times at a start, seconds of a held event loop: issue 27)
+    key = ("overridden", tuple(sorted(overrides.items())))
     protocol = mapping.protocol.model_copy(update=overrides)
-    return mapping.model_copy(update={"protocol": protocol})
+    return mapping.memo(key, lambda: mapping.model_copy(update={"protocol": protocol}))

@@ -40,12 +40,15 @@ import logging
 import socket
 import ssl
 import time
-from typing import Any
+from collections import deque
+from typing import Any, Literal
 from urllib.parse import urlsplit
 
 import aiomqtt
 import paho.mqtt.client as paho
 from aiomqtt.exceptions import MqttConnectError as _RefusedByBroker
+from paho.mqtt.client import DISCONNECT, PUBLISH
+from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
@@ -59,6 +62,10 @@ FAILURE = 0x80  # SUBACK/PUBACK reason codes from 0x80 up are failures
 MAX_PACKET = 4 * 1024 * 1024  # bytes: MQTT 5 brokers drop larger packets for the bridge
 
 _log = logging.getLogger(__name__)
+_PLAIN_ACKS = {  # PUBACK reason codes told with a shared value: success, no subscribers
+    code: ReasonCode(PacketTypes.PUBACK, identifier=code) for code in (0x00, 0x10)
+}
+_NO_PROPERTIES = Properties(PacketTypes.PUBACK)  # type: ignore[no-untyped-call]
 
 
 class Received(aiomqtt.Message):
@@ -81,15 +88,25 @@ class Received(aiomqtt.Message):
 class Acknowledgements(asyncio.Event):
     """The acknowledgements a burst of publishes waits for, as one event: it stands in
     aiomqtt's ``_pending_publishes`` for each message, whose ``_on_publish`` (and
-    ``wake_on_loss``) call ``set()`` once per message; it is set when none is due."""
+    ``wake_on_loss``) call ``set()`` once per message; it is set when none is due.
+    ``stalled`` is the longest the broker acknowledged none of them (from ``start()``)."""
 
     def __init__(self) -> None:
         super().__init__()
         self.mids: list[int] = []
         self.due = 0
+        self.stalled = 0.0
+        self._last = 0.0
+
+    def start(self) -> None:
+        """The burst is handed over: the broker's time begins."""
+        self._last = time.monotonic()
 
     def set(self) -> None:
         self.due -= 1
+        now = time.monotonic()
+        self.stalled = max(self.stalled, now - self._last)
+        self._last = now
         if self.due <= 0:
             super().set()
 
@@ -107,6 +124,26 @@ class Connection(aiomqtt.Client):
         self.watchers: dict[str, asyncio.Queue[Received]] = {}  # by exact topic, live too
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
         self.reached = False  # the socket (and TLS) connected and CONNECT was sent
+        self._client._handle_pubackcomp = self._acknowledgement  # type: ignore[method-assign,assignment]
+
+    def _acknowledgement(self, kind: Literal["PUBACK", "PUBCOMP"]) -> MQTTErrorCode:
+        """paho's PUBACK/PUBCOMP handling, but a PUBACK without properties that says
+        success or no matching subscribers (what brokers send for nearly every publish: the
+        packet identifier, on MQTT 5 perhaps with the reason code) is told to
+        ``on_publish`` with a shared reason code and no properties instead of two reason
+        codes and a properties object made for each (issue 27)."""
+        client = self._client
+        packet = client._in_packet["packet"]
+        if kind != "PUBACK" or len(packet) not in (2, 3):
+            return paho.Client._handle_pubackcomp(client, kind)
+        reason = _PLAIN_ACKS.get(packet[2] if len(packet) == 3 else 0)
+        if reason is None or (len(packet) == 3 and client._protocol != paho.MQTTv5):
+            return paho.Client._handle_pubackcomp(client, kind)
+        mid = int.from_bytes(packet[:2], "big")
+        with client._out_message_mutex:
+            if mid in client._out_messages:
+                return client._do_on_publish(mid, reason, _NO_PROPERTIES)
+        return MQTTErrorCode.MQTT_ERR_SUCCESS
 
     def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
         """The socket (and TLS) connected; paho sends the CONNECT next. Marked here, in the
@@ -175,6 +212,7 @@ class Connection(aiomqtt.Client):
 
         def write() -> None:
             try:
+                coalesce(client._out_packet)
                 client.loop_write()
             except OSError as exc:  # the connection broke: the session ends
                 if not self._disconnected.done():
@@ -202,13 +240,19 @@ class Connection(aiomqtt.Client):
 
     async def acknowledged(self, acks: Acknowledgements) -> None:
         """Wait until the broker acknowledged every publish of ``acks`` (or the connection
-        was lost); aiomqtt.MqttError if that took longer than ``TIMEOUT``."""
+        was lost); aiomqtt.MqttError if it acknowledged none of them for ``TIMEOUT``
+        seconds. A broker that keeps acknowledging, however slowly (paho keeps 20 publishes
+        in flight), is waited for: a long burst to a slow broker is no lost connection."""
         try:
-            if acks.due > 0 and not self.lost:  # else woken already, or never
-                async with asyncio.timeout(self.timeout):
-                    await acks.wait()
-        except TimeoutError:
-            raise aiomqtt.MqttError("Operation timed out") from None
+            acks.start()
+            while acks.due > 0 and not self.lost:  # else woken already, or never
+                due = acks.due
+                try:
+                    async with asyncio.timeout(self.timeout):
+                        await acks.wait()
+                except TimeoutError:
+                    if acks.due >= due:  # not one acknowledgement in all that time
+                        raise aiomqtt.MqttError("Operation timed out") from None
         finally:
             for mid in acks.mids:  # acknowledged ones are gone already
                 if self._pending_publishes.get(mid) is acks:
@@ -251,6 +295,33 @@ class Connection(aiomqtt.Client):
                     future.set_exception(aiomqtt.MqttError("connection lost"))
 
         self._disconnected.add_done_callback(wake)
+
+
+def coalesce(queue: deque[Any]) -> None:
+    """Join the packets at the head of paho's out queue that need nothing done once
+    written (every packet but a QoS 0 PUBLISH, whose ``on_publish`` paho calls then, and
+    DISCONNECT, after which it closes) into one, so that one ``send()`` carries a burst:
+    paho sends each packet on its own, a system call and a TCP segment per message."""
+    count = 0
+    for packet in queue:
+        if not _inert(packet):
+            break
+        count += 1
+    if count < 2:
+        return
+    parts = []
+    for _ in range(count):
+        packet = queue.popleft()
+        parts.append(bytes(packet["packet"][packet["pos"] :]))
+    joined = b"".join(parts)
+    # command 0 (reserved): paho's _packet_write has nothing to do once it is written
+    joined_packet = {"command": 0, "mid": 0, "qos": 0, "pos": 0, "info": None}
+    queue.appendleft(joined_packet | {"to_process": len(joined), "packet": joined})
+
+
+def _inert(packet: dict[str, Any]) -> bool:
+    kind = packet["command"] & 0xF0
+    return not (kind == PUBLISH and packet["qos"] == 0) and kind != DISCONNECT
 
 
 async def connect(

@@ -69,7 +69,10 @@ ONLINE = b"online"
 _UNSUPPORTED_PROTOCOL_VERSION = 0x84  # CONNACK reason code (3.1.1 return code 1 maps to it)
 _CLOSE_TIMEOUT = 2.0  # the goodbye "offline" must not hold up a shutdown
 FAREWELL_TIMEOUT = 2.0  # seconds for the farewell messages and the goodbye: a stop ends in 3 s
-BACKLOG_SAID_AFTER = 30.0  # seconds a PUBACK took: the broker is slower than the bridge
+# seconds without an acknowledgement while some are due: the broker is slower than the
+# bridge. Below connection.TIMEOUT (10 s), after which the session ends (the reconnect
+# loop says so).
+BACKLOG_SAID_AFTER = 5.0
 
 _log = logging.getLogger(__name__)
 
@@ -257,6 +260,11 @@ class MqttClient:
             _log.debug("MQTT: %d of the last messages failed: %s", len(failed), failed[0])
         return not isinstance(results[-1], BaseException) and not connection.lost
 
+    @property
+    def unacknowledged(self) -> int:
+        """Publishes handed to the broker and not acknowledged yet (0 when not connected)."""
+        return self._connection.unacknowledged if self._connection is not None else 0
+
     def _require(self) -> Connection:
         if self._connection is None:
             raise MqttDisconnectedError("not connected")
@@ -312,13 +320,15 @@ class MqttClient:
             raise MqttDisconnectedError(f"publish to {topic[:200]}: connection lost")
         if first is not None:
             raise first
-        waited = time.monotonic() - sent
-        if waited > BACKLOG_SAID_AFTER and not connection.backlog_said:
+        if acks.stalled > BACKLOG_SAID_AFTER and not connection.backlog_said:
             connection.backlog_said = True
             _log.warning(
-                "MQTT: the broker is slower than the bridge: an acknowledgement took %.0f s, "
-                "%d publishes wait for theirs (said once a session)",
-                waited,
+                "MQTT: the broker is slower than the bridge: it acknowledged nothing for "
+                "%.1f s; %d publishes took %.1f s in all, %d more wait for theirs; newer "
+                "values replace the ones not sent yet (said once a session)",
+                acks.stalled,
+                len(acks.mids),
+                time.monotonic() - sent,
                 connection.unacknowledged,
             )
 

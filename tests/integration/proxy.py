@@ -79,6 +79,7 @@ class Relay:
 
         passed = 0
         pending = b""
+        last = 0.0  # when the chunk before is due: none overtakes another when delay drops
         while chunk := await reader.read(65536):
             if self.hold:
                 continue
@@ -89,8 +90,9 @@ class Relay:
                 if late:
                     loop.call_later(self.late_pubacks, write, late)
                 chunk = b"".join(p for p in packets if p[0] != PUBACK or not self.late_pubacks)
-            if self.delay:
-                loop.call_later(self.delay, write, chunk)
+            if self.delay or last > loop.time():
+                last = max(loop.time() + self.delay, last + 1e-6)
+                loop.call_at(last, write, chunk)
             else:
                 write(chunk)
             passed += 1
