@@ -97,7 +97,7 @@ async def test_a_master_reads_no_password_unless_raw_reads_are_allowed(
         pump = engine.devices["pump"]
         secret = sorted(a for p in pump.points.values() if p.entity.secret for a in p.span)
         assert len(secret) == 6, "the Nastec mapping marks its password digits secret"
-        await eventually(lambda: all((H, a) in pump.state.image for a in secret), 10)
+        await eventually(lambda: all((H, a) in pump.state.image for a in secret), 30)
         first, last = secret[0], secret[-1]
         asked = [(first, 1), (first, 3), (last - 2, 3)]  # the pump reads one register a time
         if not raw_reads:  # and ranges around and across them (not every address is served)

@@ -330,7 +330,9 @@ async def test_a_breaker_switch_toggles_only_towards_the_state_asked_for(
         bridged(mosquitto, sim, [smartgen_device()]),
     ):
         await online(observer, "smartgen_hgm6100")
-        cmps = observer.json("homeassistant/device/smartgen_hgm6100/config")["cmps"]
+        config = "homeassistant/device/smartgen_hgm6100/config"  # discovery follows the state
+        await eventually(lambda: config in observer.retained, 10)
+        cmps = observer.json(config)["cmps"]
         assert cmps["generator_breaker"]["platform"] == "switch"
         assert cmps["generator_breaker"]["value_template"] == "{{ value_json.generator_on_load }}"
         await observer.client.publish(topic, "ON")

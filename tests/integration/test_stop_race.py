@@ -150,6 +150,20 @@ async def bridge_process(
             await process.wait()
 
 
+async def catching_sigterm(pid: int, within: float = 30.0) -> None:
+    """Until the process catches SIGTERM (``until_stopped`` set its handler: SigCgt in
+    /proc): a signal before that, while Python starts on a loaded machine, would test the
+    interpreter's default, not the bridge's stop."""
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        status = Path(f"/proc/{pid}/status").read_text()
+        caught = next(line for line in status.splitlines() if line.startswith("SigCgt:"))
+        if int(caught.split()[1], 16) & (1 << (signal.SIGTERM - 1)):
+            return
+        await asyncio.sleep(0.02)
+    raise AssertionError(f"the bridge did not catch SIGTERM within {within} s")
+
+
 async def stopped_after(
     process: asyncio.subprocess.Process,
     ready: Callable[[], Awaitable[None]],
@@ -166,6 +180,7 @@ async def stopped_after(
             log.append(line)
 
     reading = asyncio.create_task(read())
+    await catching_sigterm(process.pid)
     await ready()
     process.send_signal(signal.SIGTERM)
     started = time.monotonic()
