@@ -267,16 +267,25 @@ class _Connection(ServerRequestHandler):
                 self.counters.refused += 1
                 reply = ExceptionResponse(pdu.function_code, request)
             else:
-                answer = await self.owner.answer(self.counters, request)
-                reply = (
-                    ExceptionResponse(pdu.function_code, answer)
-                    if isinstance(answer, int)
-                    else response_of(request, answer)
-                )
+                reply = await self._reply(pdu, request)
             self._send(pdu, reply)
         finally:
             self.pending -= 1
             self.counters.queued -= 1
+
+    async def _reply(self, pdu: ModbusPDU, request: ProxyRequest) -> ModbusPDU:
+        """``answer``'s reply; a fault of the bridge's own (not a refusal, a device's
+        exception or silence, which ``answer`` turns into codes) is logged and answered
+        0x04: no request may end the server, and with it the bridge."""
+        try:
+            answer = await self.owner.answer(self.counters, request)
+        except Exception:
+            self.counters.failed += 1
+            log.exception("gateway: a request failed inside the bridge: %s", request)
+            return ExceptionResponse(pdu.function_code, Code.DEVICE_FAILURE)
+        if isinstance(answer, int):
+            return ExceptionResponse(pdu.function_code, answer)
+        return response_of(request, answer)
 
     def _send(self, request: ModbusPDU, reply: ModbusPDU) -> None:
         if self.transport is None or self.transport.is_closing():
@@ -350,8 +359,8 @@ class GatewayServer:
             except RuntimeError:
                 await server.shutdown()  # type: ignore[no-untyped-call]
                 raise BusError(
-                    f"gateway: cannot listen on {self.host}:{self.port} "
-                    "(in use, or no such address)"
+                    f"gateway: cannot listen on {self.host}:{self.port} (in use, or no such "
+                    "address): set bridge.gateway.host and port"
                 ) from None
             for sock in getattr(server.transport, "sockets", None) or ():
                 self.port = int(sock.getsockname()[1])

@@ -19,10 +19,12 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from bridge.config import load_config_data
 from bridge.core.entity import Table
+from bridge.core.gateway import ClientBook, ProxyRequest
 from bridge.core.request import Write
 from bridge.dispatcher import Dispatcher
 from bridge.gateway import Gateway
 from bridge.modbus.engine import Engine
+from bridge.modbus.gateway_server import GatewayServer, Limits
 from bridge.modbus.simulator import Quirks, Simulator
 from tests.integration.harness import (
     FAST_POLICY,
@@ -324,3 +326,33 @@ async def test_unmapped_words_go_raw_only_where_the_device_allows_it_and_never_g
         out_of_range = await client.write_registers(4096, [1, 2, 3], device_id=STARTER)
         assert out_of_range.isError() and out_of_range.exception_code == 0x03  # 3 A: min 10
         assert len(sim.writes) == written
+
+
+@pytest.mark.asyncio
+async def test_a_fault_inside_the_bridge_answers_0x04_and_the_server_serves_on() -> None:
+    """The server's own boundary: whatever fails behind ``answer`` (a bug, not a refusal
+    or a device's silence, which come back as codes) is answered 0x04 and logged; the
+    connection and the server go on, so no request can end the bridge."""
+
+    async def answer(client: Any, request: ProxyRequest) -> tuple[int, ...] | int:
+        if request.address == 13:
+            raise RuntimeError("a fault of the bridge's own")
+        return tuple(range(request.count))
+
+    server = GatewayServer("127.0.0.1", 0, answer, Limits(), ClientBook())
+    task = asyncio.create_task(server.run())
+    try:
+        await asyncio.wait_for(server.ready.wait(), 5)
+        client = AsyncModbusTcpClient("127.0.0.1", port=server.port, timeout=3, retries=0)
+        await client.connect()
+        try:
+            failed = await client.read_holding_registers(13, count=2, device_id=1)
+            assert failed.isError() and failed.exception_code == 0x04
+            served = await client.read_holding_registers(20, count=3, device_id=1)
+            assert served.registers == [0, 1, 2]
+        finally:
+            client.close()
+        assert not task.done()
+        assert server.book.totals().failed == 1
+    finally:
+        await cancel(task)
