@@ -14,26 +14,23 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
 
-from bridge.app import Bridge
-from bridge.config import load_config_data
 from bridge.core.entity import Table
 from tests.ha.homeassistant import HomeAssistant, free_port
-from tests.integration.harness import cancel, eventually, serving_serial, simulator
+from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import observing
 from tests.integration.test_gateway_masters import (
     MBPOLL,
     PUMP,
     STARTER,
-    Site,
     mbpoll,
     mbpoll_master,
     pymodbus_master,
+    site,
     words,
 )
 
@@ -69,43 +66,6 @@ modbus:
 """
 
 
-@contextlib.asynccontextmanager
-async def site(broker: Broker, folder: Path, gateway_port: int) -> AsyncIterator[Site]:
-    sim = simulator((PUMP, "nastec_vasco"), (STARTER, "soft_starter"))
-    async with serving_serial(sim, baudrate=38400) as path:
-        data = {
-            "mqtt": {"url": f"mqtt://{broker.host}:{broker.port}", "command_expiry": 3},
-            "bridge": {
-                "gateway": {
-                    "enabled": True,
-                    "port": gateway_port,
-                    "units": {1: "pump", 3: "starter"},
-                    "allow_writes": True,
-                },
-            },
-            "buses": [
-                {"id": "line", "transport": "rtu", "port": path, "baudrate": 38400}
-                | {"timeout": 0.5, "retries": 0}
-            ],
-            "devices": [
-                {"id": "pump", "bus": "line", "unit": PUMP, "mapping": "nastec_vasco"},
-                {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"},
-            ],
-        }
-        for device in data["devices"]:
-            device["poll"] = {"fast": 1.0, "slow": 5}
-        running = Bridge(load_config_data(data, folder / "config.yaml"))
-        task = asyncio.create_task(running.run())
-        try:
-            await asyncio.wait_for(running.gateway.server.ready.wait(), 10)
-            await eventually(
-                lambda: all(p.health.online for p in running.engine.devices.values()), 15
-            )
-            yield Site(running, sim, gateway_port, 0)
-        finally:
-            await cancel(task)
-
-
 def state_of(states: list[dict[str, object]], entity_id: str) -> str | None:
     for state in states:
         if state["entity_id"] == entity_id:
@@ -133,7 +93,7 @@ async def test_three_masters_share_the_line_through_the_bridge(
 ) -> None:
     port = free_port()
     async with (
-        site(ha_broker, tmp_path, port) as s,
+        site(ha_broker, tmp_path, port, web=False) as s,
         observing(ha_broker, "modbus/starter") as observer,
     ):
         engine = s.bridge.engine

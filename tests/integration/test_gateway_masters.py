@@ -48,15 +48,19 @@ class Site:
 
 
 @contextlib.asynccontextmanager
-async def site(broker: Broker, folder: Path) -> AsyncIterator[Site]:
+async def site(
+    broker: Broker, folder: Path, gateway_port: int | None = None, *, web: bool = True
+) -> AsyncIterator[Site]:
+    """The bridge polling two devices on one RTU line, with its gateway (writes allowed) on
+    ``gateway_port`` (a free one by default) and, with ``web``, its web page."""
     sim = simulator((PUMP, "nastec_vasco"), (STARTER, "soft_starter"))
-    web_port, gateway_port = free_port(), free_port()
+    web_port = free_port() if web else 0
+    gateway_port = gateway_port or free_port()
     async with serving_serial(sim, baudrate=38400) as path:
         data = {
             "mqtt": {"url": broker.url, "command_expiry": 3},
             "bridge": {
                 "health_interval": 0.3,
-                "web": {"enabled": True, "port": web_port},
                 "gateway": {
                     "enabled": True,
                     "port": gateway_port,
@@ -73,12 +77,15 @@ async def site(broker: Broker, folder: Path) -> AsyncIterator[Site]:
                 {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"},
             ],
         }
+        if web:
+            data["bridge"]["web"] = {"enabled": True, "port": web_port}
         for device in data["devices"]:
             device["poll"] = {"fast": 1.0, "slow": 5}
         running = Bridge(load_config_data(data, folder / "config.yaml"))
         task = asyncio.create_task(running.run())
         try:
-            await listening(web_port)
+            if web:
+                await listening(web_port)
             await asyncio.wait_for(running.gateway.server.ready.wait(), 10)
             await eventually(
                 lambda: all(p.health.online for p in running.engine.devices.values()), 15

@@ -22,29 +22,22 @@ dispatcher and gateway; pymodbus' client as the hostile master.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import struct
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from bridge.config import load_config_data
 from bridge.core.entity import Table
 from bridge.core.mapping import load_mapping
-from bridge.dispatcher import Dispatcher
 from bridge.gateway import Gateway
 from bridge.modbus.engine import Engine
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from tests.integration.harness import (
-    FAST_POLICY,
-    cancel,
     eventually,
-    running,
     serving_tcp,
     simulator,
 )
@@ -53,30 +46,13 @@ from tests.integration.test_gateway_server import (
     STARTER,
     exchange,
     frame,
+    gateway_for,
     master,
     site,
     words,
 )
 
 H = Table.HOLDING
-
-
-@contextlib.asynccontextmanager
-async def gateway_for(data: dict[str, Any], folder: Path) -> AsyncIterator[tuple[Gateway, Engine]]:
-    """The engine, dispatcher and gateway of a config, running."""
-    loaded = load_config_data(data, folder / "config.yaml")
-    engine = Engine(loaded, policy=FAST_POLICY)
-    dispatcher = Dispatcher(
-        engine, 5.0, spawn=lambda work, fail: None, error=lambda *a: None, read=lambda d: None
-    )
-    gateway = Gateway(loaded, engine, dispatcher)
-    async with running(engine):
-        task = asyncio.create_task(gateway.run())
-        try:
-            await asyncio.wait_for(gateway.server.ready.wait(), 5)
-            yield gateway, engine
-        finally:
-            await cancel(task)
 
 
 # --- secrets --------------------------------------------------------------------------------

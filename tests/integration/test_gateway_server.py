@@ -52,34 +52,39 @@ async def site(
     sim = simulator((PUMP, "nastec_vasco"), (STARTER, "soft_starter"))
     async with serving_serial(sim, baudrate=38400) as path:
         settings = {"enabled": True, "port": 0, "units": {1: "pump", 3: "starter"}} | gateway
-        loaded = load_config_data(
-            {
-                "bridge": {"gateway": settings} | (bridge or {}),
-                "buses": [
-                    {"id": "line", "transport": "rtu", "port": path}
-                    | {"baudrate": 38400, "timeout": 0.3}
-                ],
-                "devices": [
-                    {"id": "pump", "bus": "line", "unit": PUMP, "mapping": "nastec_vasco"}
-                    | (pump or {}),
-                    {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"}
-                    | (starter or {}),
-                ],
-            },
-            Path("gateway-test.yaml"),
-        )
-        engine = Engine(loaded, policy=FAST_POLICY)
-        dispatcher = Dispatcher(
-            engine, 5.0, spawn=lambda work, fail: None, error=lambda *a: None, read=lambda d: None
-        )
-        gateway = Gateway(loaded, engine, dispatcher)
-        async with running(engine):
-            task = asyncio.create_task(gateway.run())
-            try:
-                await asyncio.wait_for(gateway.server.ready.wait(), 5)
-                yield gateway, sim, engine
-            finally:
-                await cancel(task)
+        data = {
+            "bridge": {"gateway": settings} | (bridge or {}),
+            "buses": [
+                {"id": "line", "transport": "rtu", "port": path}
+                | {"baudrate": 38400, "timeout": 0.3}
+            ],
+            "devices": [
+                {"id": "pump", "bus": "line", "unit": PUMP, "mapping": "nastec_vasco"}
+                | (pump or {}),
+                {"id": "starter", "bus": "line", "unit": STARTER, "mapping": "soft_starter"}
+                | (starter or {}),
+            ],
+        }
+        async with gateway_for(data, Path()) as (gateway, engine):
+            yield gateway, sim, engine
+
+
+@contextlib.asynccontextmanager
+async def gateway_for(data: dict[str, Any], folder: Path) -> AsyncIterator[tuple[Gateway, Engine]]:
+    """The engine, dispatcher and gateway of a config, running."""
+    loaded = load_config_data(data, folder / "gateway-test.yaml")
+    engine = Engine(loaded, policy=FAST_POLICY)
+    dispatcher = Dispatcher(
+        engine, 5.0, spawn=lambda work, fail: None, error=lambda *a: None, read=lambda d: None
+    )
+    gateway = Gateway(loaded, engine, dispatcher)
+    async with running(engine):
+        task = asyncio.create_task(gateway.run())
+        try:
+            await asyncio.wait_for(gateway.server.ready.wait(), 5)
+            yield gateway, engine
+        finally:
+            await cancel(task)
 
 
 @contextlib.asynccontextmanager
