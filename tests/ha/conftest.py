@@ -26,16 +26,23 @@ def ha_broker(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Broker]:
     broker.stop()
 
 
-@pytest.fixture(scope="module")
-def hass(request: pytest.FixtureRequest, ha_broker: Broker) -> Iterator[HomeAssistant]:
-    """One Home Assistant per test module, with the integrations the module names in
-    ``HA_INTEGRATIONS`` (the recorder for the statistics) besides MQTT."""
+def installed_home_assistant() -> tuple[Path, str]:
+    """The chroot and the version ``HA_ROOT``/``HA_VERSION`` name; the test is skipped,
+    saying why, when that version is not installed or cannot run here."""
     version = os.environ.get("HA_VERSION", "")
     root = Path(os.environ.get("HA_ROOT", HA_CACHE))
     if not version or not (root / f"opt/ha-{version}/.ready").exists():
         pytest.skip("no Home Assistant installed: `make test-ha` installs and runs them")
     if shutil.which("chroot") is None or os.geteuid() != 0:
         pytest.skip("Home Assistant runs in a chroot: needs root")
+    return root, version
+
+
+@pytest.fixture(scope="module")
+def hass(request: pytest.FixtureRequest, ha_broker: Broker) -> Iterator[HomeAssistant]:
+    """One Home Assistant per test module, with the integrations the module names in
+    ``HA_INTEGRATIONS`` (the recorder for the statistics) besides MQTT."""
+    root, version = installed_home_assistant()
     ha = HomeAssistant(root, version, integrations=getattr(request.module, "HA_INTEGRATIONS", ()))
     try:
         ha.start()

@@ -13,19 +13,17 @@ every-key and shaping examples (tests/importer/test_ha_modbus.py).
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
 
-import pytest
 import yaml
 
 from bridge.importer.ha_modbus import import_ha
 from bridge.importer.source import load_source
-from tests.ha.conftest import HA_CACHE
+from tests.ha.conftest import installed_home_assistant
 from tests.ha.homeassistant import CLEAN_ENV
 from tests.importer.test_ha_modbus import CASES, DATA, EVERY_KEY, SHAPED, WHOLE, hub_with
 from tests.importer.test_ha_tests import configs as ha_test_configs
@@ -85,12 +83,7 @@ def home_assistants_verdict(root: Path, version: str, folder: Path) -> dict[str,
 
 
 def test_every_config_home_assistant_accepts_converts_with_each_entity_accounted_for() -> None:
-    version = os.environ.get("HA_VERSION", "")
-    root = Path(os.environ.get("HA_ROOT", HA_CACHE))
-    if not version or not (root / f"opt/ha-{version}/.ready").exists():
-        pytest.skip("no Home Assistant installed: `make test-ha` installs and runs them")
-    if shutil.which("chroot") is None or os.geteuid() != 0:
-        pytest.skip("Home Assistant runs in a chroot: needs root")
+    root, version = installed_home_assistant()
     (root / "tmp").mkdir(exist_ok=True)
     folder = Path(tempfile.mkdtemp(prefix="import-schema-", dir=root / "tmp"))
     try:
