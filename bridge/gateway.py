@@ -2,7 +2,7 @@
 TCP server (bridge/modbus/gateway_server.py), between the bridge's own polls.
 
 ``Gateway.answer(client, request)`` decides every request (the pure rules are
-bridge/core/gateway.py):
+bridge/core/gateway.py, and what a write's words mean bridge/core/gateway_writes.py):
 
 - its unit must be in ``bridge.gateway.units`` (else 0x0A); a configured device that is
   offline answers 0x0B at once, without a frame (the poller brings it back);
@@ -38,12 +38,11 @@ import contextlib
 import logging
 import time
 from collections import Counter
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import AsyncIterator
 from typing import Any
 
 from bridge.config import GatewayConfig, LoadedConfig, TcpBus
 from bridge.core.address import to_wire
-from bridge.core.codec import COMMAND_PRESS, Value, decode, encode
 from bridge.core.entity import Table
 from bridge.core.gateway import (
     MAX_READ_BITS,
@@ -57,8 +56,8 @@ from bridge.core.gateway import (
     check_request,
     code_for,
 )
+from bridge.core.gateway_writes import GatewayRefusalError, items_of
 from bridge.core.management_request import RequestError
-from bridge.core.mapping import Point
 from bridge.core.reach import check_raw_read, check_raw_write
 from bridge.core.request import Read, Write
 from bridge.dispatcher import Dispatcher
@@ -73,14 +72,6 @@ from bridge.modbus.scheduler import Priority
 log = logging.getLogger(__name__)
 Cell = tuple[Table, int]
 MASKED = "***"  # what the log shows for the value of a secret register
-
-
-class GatewayRefusalError(BridgeError):
-    """A request the gateway refuses itself, with the exception code it answers."""
-
-    def __init__(self, code: Code, reason: str) -> None:
-        super().__init__(reason)
-        self.code = code
 
 
 class Gateway:
@@ -197,7 +188,7 @@ class Gateway:
             raise GatewayRefusalError(
                 Code.ILLEGAL_FUNCTION, f"unit {request.unit}: writes go to configured devices only"
             )
-        items = items_of(poller, request)
+        items = items_of(poller.points.values(), poller.state.image, request)
         deadline = time.monotonic() + self.expiry
         device_id = poller.device.id
         async with self._slot(route.bus):
@@ -323,130 +314,3 @@ def _device_submit(poller: DevicePoller) -> Submit:
         return await poller.link.submit(request, Priority.PROXY)
 
     return submit
-
-
-def items_of(poller: DevicePoller, request: ProxyRequest) -> dict[str, object] | None:
-    """The command a write of words amounts to: each writable entity whose words it writes,
-    with the value those words mean; None when no word is a writable entity's (a raw write).
-    GatewayRefusalError: 0x03 for an entity written in part, a command word no button
-    sends, words that mean no value (``_value``); 0x01 for a toggle or pulse, and for
-    entities written with words no entity covers (raw, they would skip the checks)."""
-    table = request.table
-    cells: dict[Cell, int] = {(table, request.address + i): v for i, v in enumerate(request.values)}
-    items: dict[str, object] = {}
-    covered: set[Cell] = set()
-    buttons: set[Cell] = set()
-    for point in poller.points.values():
-        entity = point.entity
-        space = Table.COIL if point.table is Table.COIL else Table.HOLDING
-        if not entity.writable or space is not table:
-            continue
-        mine = [(space, point.write_address + i) for i in range(point.count)]
-        hit = [c for c in mine if c in cells]
-        if not hit:
-            continue
-        if len(hit) != len(mine):
-            raise GatewayRefusalError(
-                Code.ILLEGAL_VALUE, f"{point.key}: write its {len(mine)} registers at once"
-            )
-        if point.state_source is not None or entity.pulse:
-            raise GatewayRefusalError(
-                Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
-            )
-        words = tuple(cells[c] for c in mine)
-        if entity.press is not None:
-            buttons |= set(mine)
-            if _presses(point, words, poller.state.image):
-                items[point.key] = COMMAND_PRESS
-                covered |= set(mine)
-            continue
-        items[point.key] = _value(point, words, poller.state.image)
-        covered |= set(mine)
-    missing = set(cells) - covered
-    if missing & buttons:
-        raise GatewayRefusalError(
-            Code.ILLEGAL_VALUE, "no command of this register writes that word"
-        )
-    _check_kept_bits(poller.points.values(), cells, covered, poller.state.image)
-    if missing and covered:  # raw, they would skip the entities' checks (range, spacing)
-        raise GatewayRefusalError(
-            Code.ILLEGAL_FUNCTION,
-            f"{', '.join(items)} written with registers no writable entity covers: write "
-            "them on their own",
-        )
-    return None if missing else items
-
-
-def _check_kept_bits(
-    points: Iterable[Point], cells: dict[Cell, int], covered: set[Cell], image: dict[Cell, int]
-) -> None:
-    """A register whose writable entities are bit fields: the writer writes their bits
-    and keeps the device's others. 0x03 unless the master sent those others as the bridge
-    last read them, so a write never answers success for bits that were not written."""
-    masks: dict[Cell, int] = {}
-    for point in points:
-        entity = point.entity
-        if not entity.writable or point.table.is_bits:
-            continue
-        width = entity.field_width
-        mask = 0xFFFF if width is None else ((1 << width) - 1) << (entity.bit or 0)
-        for offset in range(point.count):
-            cell = (Table.HOLDING, point.write_address + offset)
-            if cell in covered:
-                masks[cell] = masks.get(cell, 0) | mask
-    for cell, mask in masks.items():
-        kept = ~mask & 0xFFFF
-        held = image.get(cell)
-        if kept and (held is None or (cells[cell] ^ held) & kept):
-            shown = "not read yet" if held is None else f"{held & kept:#06x}"
-            raise GatewayRefusalError(
-                Code.ILLEGAL_VALUE,
-                f"register {cell[1]}: bits {kept:#06x} are no entity's; the device keeps "
-                f"them ({shown}): send them as it holds them",
-            )
-
-
-def _presses(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> bool:
-    try:
-        writes = encode(point, COMMAND_PRESS, image)
-    except BridgeError:
-        return False
-    return len(writes) == 1 and writes[0].values == words
-
-
-def _value(point: Point, words: tuple[int, ...], image: dict[Cell, int]) -> Value:
-    """What ``words`` written at the entity's write address mean, read as the entity.
-
-    GatewayRefusalError (0x03) unless they mean a value the entity is set to by exactly
-    these words: never a sentinel or a NaN (no value), an enum code without a label, a
-    register the value needs that was not read yet, or words the bridge would write
-    otherwise (7 to an on/off register, digits beyond the entity's precision). Nothing of
-    the request is written then."""
-    seen = dict(image)
-    for offset, word in enumerate(words):
-        seen[(point.table, point.address + offset)] = word
-    try:
-        value = decode(point, seen)
-        writes = encode(point, value, seen)
-    except BridgeError as error:
-        raise GatewayRefusalError(
-            Code.ILLEGAL_VALUE, f"{point.key}: {list(words)} is no value it takes ({error})"
-        ) from None
-    written = {cell: word for w in writes for cell, word in _cells_of(w).items()}
-    space = Table.COIL if point.table is Table.COIL else Table.HOLDING
-    wanted = {(space, point.write_address + i): word for i, word in enumerate(words)}
-    if written != wanted:
-        raise GatewayRefusalError(
-            Code.ILLEGAL_VALUE,
-            f"{point.key}: {list(words)} reads as {value!r}, which the bridge writes as "
-            f"{sorted(written.values())}",
-        )
-    return value
-
-
-def _cells_of(write: Write) -> dict[Cell, int]:
-    """The cells a write sets, coils as 0/1 (FC05 sends its ON word)."""
-    values = write.values
-    if write.function == 5:
-        values = (1 if values[0] else 0,)
-    return {(write.table, write.address + i): v for i, v in enumerate(values)}
