@@ -32,7 +32,8 @@ from bridge.core.mapping import builtin_mapping_names
 from bridge.mqtt import MqttClient
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.harness import eventually, serving_tcp, simulator
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
+from tests.ports import free_port
 from tests.supervisor_rules import (
     SupervisorMissingError,
     config_problems,

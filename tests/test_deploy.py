@@ -15,7 +15,6 @@ import os
 import re
 import shlex
 import shutil
-import socket
 import subprocess
 import sys
 import textwrap
@@ -41,6 +40,7 @@ from bridge.config import (
 from bridge.core.health_report import BusSnapshot, Snapshot
 from bridge.core.mapping import builtin_mapping_names
 from bridge.metrics import BUS_HEALTH_PATH, HEALTH_PATH, serve_metrics
+from tests.ports import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 COMPOSE_FILE = ROOT / "docker-compose.yml"
@@ -470,9 +470,7 @@ async def test_healthcheck_says_alive_while_a_bus_is_down_and_fails_when_nothing
     def source() -> Snapshot:
         return Snapshot(wall=0.0, monotonic=0.0, uptime=1.0, buses=(current[0],))
 
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_port()
     url = f"http://127.0.0.1:{port}{HEALTH_PATH}"
     async with serve_metrics(MetricsConfig(enabled=True, port=port), source):
         healthy = await asyncio.to_thread(run_healthcheck, url)

@@ -32,7 +32,8 @@ import yaml
 
 from bridge import __version__
 from bridge.core.mapping import builtin_mapping_names
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
+from tests.ports import free_port
 from tests.test_deploy import header_commands
 
 ROOT = Path(__file__).resolve().parent.parent

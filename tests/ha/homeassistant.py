@@ -19,7 +19,6 @@ import json
 import os
 import re
 import shutil
-import socket
 import subprocess
 import tempfile
 import time
@@ -29,6 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from websockets.asyncio.client import ClientConnection, connect
+
+from tests.ports import free_port
 
 # uv (which installs the integrations' requirements) trusts the chroot's certificate store only
 # with UV_NATIVE_TLS (tools/ha_env.sh adds the host's authorities to it)
@@ -72,12 +73,6 @@ def parse_log(text: str) -> list[LogRecord]:
             last = records[-1]
             records[-1] = LogRecord(last.time, last.level, last.logger, f"{last.message}\n{line}")
     return records
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 CONFIGURATION = """\

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from bridge.core.entity import Table
-from tests.ha.homeassistant import HomeAssistant, free_port
+from tests.ha.homeassistant import HomeAssistant
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import observing
@@ -33,6 +33,7 @@ from tests.integration.test_gateway_masters import (
     site,
     words,
 )
+from tests.ports import free_port
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(600)]
 H = Table.HOLDING

@@ -22,7 +22,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from tests.integration.mosquitto import HOST, free_port
+from tests.integration.mosquitto import HOST
+from tests.ports import free_port
 
 
 @dataclass
@@ -93,13 +94,34 @@ class ServerBroker:
             if any(process.poll() is not None for process in self.processes):
                 self.stop()
                 raise RuntimeError(f"{self.name} exited on port {self.port}:\n{self.log}")
-            try:
-                with socket.create_connection((self.host, self.port), timeout=0.2):
-                    return
-            except OSError:
-                time.sleep(0.05)
+            if _answers_connect(self.host, self.port):
+                return
+            time.sleep(0.05)
         self.stop()
-        raise RuntimeError(f"{self.name} did not listen on {self.port} in time:\n{self.log}")
+        raise RuntimeError(f"{self.name} did not answer on {self.port} in time:\n{self.log}")
+
+    def exited(self) -> bool:
+        """Whether one of its processes has ended (stop() not called)."""
+        return any(process.poll() is not None for process in self.processes)
+
+
+# An MQTT 3.1.1 CONNECT (clean session, keepalive 10 s, client id "ready") and DISCONNECT.
+_CONNECT = bytes([0x10, 17, 0, 4]) + b"MQTT" + bytes([4, 0x02, 0, 10, 0, 5]) + b"ready"
+_DISCONNECT = bytes([0xE0, 0])
+
+
+def _answers_connect(host: str, port: int) -> bool:
+    """Whether the port answers an MQTT CONNECT with a CONNACK: a broker may take TCP
+    connections before it can serve them (RabbitMQ's listener opens during its boot)."""
+    try:
+        with socket.create_connection((host, port), timeout=1.0) as sock:
+            sock.sendall(_CONNECT)
+            answer = sock.recv(4)
+            if answer[:1] == b"\x20":
+                sock.sendall(_DISCONNECT)
+            return answer[:1] == b"\x20" and answer[3:4] == b"\x00"
+    except OSError:
+        return False
 
 
 def _end(process: subprocess.Popen[bytes]) -> None:

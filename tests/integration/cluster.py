@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tests.integration.brokers import NATS_SERVER, NatsBroker
-from tests.integration.mosquitto import HOST, free_port
+from tests.integration.mosquitto import HOST
+from tests.ports import free_port
 
 NODES = 3
 

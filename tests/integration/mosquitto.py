@@ -21,6 +21,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tests.ports import free_port
+
 MOSQUITTO = "/usr/sbin/mosquitto"
 DYNSEC = "/usr/lib/x86_64-linux-gnu/mosquitto_dynamic_security.so"
 HOST = "127.0.0.1"
@@ -171,12 +173,6 @@ def has_dynamic_security() -> bool:
 
 def has_mosquitto_passwd() -> bool:
     return shutil.which("mosquitto_passwd") is not None
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind((HOST, 0))
-        return int(probe.getsockname()[1])
 
 
 def make_tls_files(folder: Path) -> TlsFiles:

@@ -61,6 +61,8 @@ def _session_broker(
     try:
         yield broker
     finally:
+        if broker.exited():  # shown under the failing test's teardown
+            print(f"{name} had exited; its log:\n{broker.log}", file=sys.stderr)
         broker.stop()
 
 

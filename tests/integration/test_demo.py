@@ -25,7 +25,7 @@ from bridge.config import MqttConfig
 from bridge.mqtt import MqttClient
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.mosquitto import Broker, has_mosquitto
-from tests.integration.test_simulate_cli import free_port
+from tests.ports import free_port
 
 DEVICES = {seed.id for seed in SEEDS}
 

@@ -32,7 +32,8 @@ from bridge.modbus.simulator import Simulator
 from tests.integration.harness import cancel, eventually, serving_serial, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import observing
-from tests.integration.web import free_port, http, listening
+from tests.integration.web import http, listening
+from tests.ports import free_port
 
 H = Table.HOLDING
 PUMP, STARTER = 1, 3

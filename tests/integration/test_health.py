@@ -33,6 +33,7 @@ from tests.integration import harness
 from tests.integration.harness import cancel, eventually, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import Observer, observing
+from tests.ports import free_port
 
 HEALTH = "modbus/bridge/health"
 PUMP, DEAD, FAULTY = 1, 2, 3
@@ -102,13 +103,6 @@ def latest(observer: Observer) -> dict[str, Any]:
 
 def device(observer: Observer, device_id: str) -> dict[str, Any]:
     return latest(observer).get("devices", {}).get(device_id, {})
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-        return port
 
 
 def scrape(port: int, path: str = "/metrics") -> dict[Sample, float]:

@@ -20,7 +20,7 @@ from bridge.core.request import Read
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.modbus.transport import Transport
 from tests.integration.harness import serving_tcp
-from tests.integration.test_simulate_cli import free_port
+from tests.ports import free_port
 
 pytestmark = pytest.mark.asyncio
 HA_YAML = """\

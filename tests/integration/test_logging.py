@@ -26,7 +26,7 @@ from tests.integration.harness import (
     tcp_bus,
 )
 from tests.integration.mosquitto import Broker
-from tests.integration.test_simulate_cli import free_port
+from tests.ports import free_port
 
 
 def events(records: list[logging.LogRecord], device: str) -> list[str]:

@@ -29,7 +29,8 @@ from bridge.mqtt import (
 from bridge.mqtt import connection as connection_module
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.harness import eventually
-from tests.integration.mosquitto import Broker, TlsFiles, free_port
+from tests.integration.mosquitto import Broker, TlsFiles
+from tests.ports import free_port
 
 STATE = "t/bridge/state"
 T = TypeVar("T")

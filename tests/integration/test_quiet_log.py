@@ -21,9 +21,10 @@ from bridge.app import Bridge
 from bridge.config import load_config_data
 from bridge.mqtt import MqttClient
 from tests.integration.harness import eventually, serving_tcp, simulator
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
 from tests.integration.proxy import relayed
 from tests.integration.test_one_bridge import started
+from tests.ports import free_port
 
 SEEDS = ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100")
 # units on one simulated gateway (one bus, one frame in flight): two of each seed model,

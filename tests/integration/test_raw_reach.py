@@ -29,7 +29,8 @@ from bridge.modbus.simulator import Simulator
 from tests.integration.harness import cancel, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.test_management import client_of, online, request
-from tests.integration.web import free_port, http, listening
+from tests.integration.web import http, listening
+from tests.ports import free_port
 
 ANY_UNIT = 0  # the simulated drive answers every unit id
 COMMAND, SET_VALUE, PASSWORD = 0x2000, 0x1000, 0x1F00  # P2 wire addresses

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import signal
-import socket
 import subprocess
 import sys
 
@@ -14,12 +13,7 @@ from bridge.config import TcpBus
 from bridge.core.entity import Table
 from bridge.core.request import Read
 from bridge.modbus.transport import Transport
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+from tests.ports import free_port
 
 
 @pytest.mark.asyncio

@@ -30,8 +30,9 @@ from bridge.app import Bridge
 from bridge.config import MqttConfig, load_config_data
 from bridge.mqtt import MqttClient
 from tests.integration.harness import eventually, serving_tcp, simulator
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
 from tests.integration.proxy import Relay, relayed
+from tests.ports import free_port
 
 STOP_WITHIN = 3.0  # seconds from SIGTERM (or the cancel) to the end
 TURNS = tuple(range(-3, 16))  # event-loop turns from the cut to the cancel (< 0: cancel first)

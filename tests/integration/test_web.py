@@ -27,7 +27,8 @@ from bridge.mqtt import MqttClient
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.test_demo import demo, read_until, stop
-from tests.integration.web import PUMP, STARTER, TOKEN, events, free_port, http, site
+from tests.integration.web import PUMP, STARTER, TOKEN, events, http, site
+from tests.ports import free_port
 
 JSON = {"Content-Type": "application/json"}
 

@@ -12,7 +12,8 @@ import pytest
 
 from bridge.web import http as web_http
 from bridge.web.http import EventSink, EventStream, HttpServer, Request, Response
-from tests.integration.web import free_port, http, parse_answer
+from tests.integration.web import http, parse_answer
+from tests.ports import free_port
 
 
 async def echo(request: Request) -> Response | EventStream:

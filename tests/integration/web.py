@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import socket
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,16 +16,10 @@ from bridge.config import load_config_data
 from bridge.modbus.simulator import Simulator
 from tests.integration.harness import cancel, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
+from tests.ports import free_port
 
 PUMP, STARTER = 1, 3
 TOKEN = "cabinet-token-0123456789"
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-        return port
 
 
 @dataclass
