@@ -163,10 +163,12 @@ async def test_scan_through_the_running_bridge_scheduler() -> None:
     sim = simulator((1, "nastec_vasco"), (3, "p2_vfd"))
     async with serving_tcp(sim) as port:
         devices = [{"id": "pump", "bus": "tcp", "unit": 1, "mapping": "nastec_vasco"}]
-        engine = Engine(config([tcp_bus_fields(port)], devices))
+        # generous timeouts: the loop serves the simulator, the poll and the scan, on a
+        # machine running other test workers (CI saw a 0.5 s connect time out)
+        engine = Engine(config([tcp_bus_fields(port, timeout=2.0)], devices))
         async with running(engine):
             submit = scheduler_submit(engine.schedulers["tcp"])
-            found = await scan(submit, [1, 2, 3], 0.3)
+            found = await scan(submit, [1, 2, 3], 1.0)
             reading = await read_interpreted(submit, 1, raw_read(HOLDING, 54), 1.0)
     assert [f.unit for f in found] == [1, 3]
     assert reading["registers"] == held(sim, 1, HOLDING, 54, 1)
