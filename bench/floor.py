@@ -49,7 +49,7 @@ from bridge.core.codec import Value
 from bridge.core.state import plain_payload
 from bridge.core.topics import Topics
 from bridge.mqtt import MqttClient
-from tests.integration.mosquitto import free_port
+from tests.ports import free_port
 
 BRIDGE = Path(sys.executable).with_name("modbus-mqtt-bridge")
 WARMUP = 5.0

@@ -74,7 +74,7 @@ from scale import cpu_seconds, listening, memory_kib, process
 
 from bridge.config import MqttConfig
 from bridge.mqtt import MqttClient, MqttDisconnectedError
-from tests.integration.mosquitto import free_port
+from tests.ports import free_port
 
 WARMUP, DEAD_WARMUP = 5.0, 10.0
 OUTAGE, AFTER_OUTAGE = 5.0, 10.0

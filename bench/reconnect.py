@@ -31,7 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the private brok
 from bench.scale import BRIDGE, MAPPING, bridge_config, listening, process
 from bridge.config import MqttConfig
 from bridge.mqtt import MqttClient
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
+from tests.ports import free_port
 
 OUTAGE = 5.0
 DEVICE = "g0-u1"

@@ -56,7 +56,8 @@ from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.core.planner import limits_for, plan_reads
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.mqtt import MqttClient
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
+from tests.ports import free_port
 
 MAPPING = "soft_starter"
 PERIOD = 1.0  # the fast class

@@ -38,7 +38,8 @@ from bridge.app import Bridge
 from bridge.config import load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
-from tests.integration.mosquitto import Broker, free_port
+from tests.integration.mosquitto import Broker
+from tests.ports import free_port
 
 SEEDS = ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100")
 GENSET = "smartgen_hgm6100"
