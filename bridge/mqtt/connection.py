@@ -9,7 +9,8 @@ on MQTT 5, a session expiry of 0 and ``MAX_PACKET`` as the largest packet the br
 accepts (the broker drops bigger ones instead of sending them). It tells a refusal
 (MqttConnectError with the broker's code), a connection taken but never answered
 (MqttUnansweredError: the session falls back to 3.1.1) and a broker out of reach apart.
-``TIMEOUT`` bounds every wait for an answer: CONNACK, PUBACK, SUBACK, UNSUBACK. The socket
+``TIMEOUT`` bounds every wait for an answer: CONNACK, PUBACK, SUBACK, UNSUBACK (a PUBACK
+wait ends only when the broker acknowledged no publish at all for that long). The socket
 sends at once (TCP_NODELAY).
 
 ``Connection`` is aiomqtt's client with paho's callbacks overridden:
@@ -124,6 +125,7 @@ class Connection(aiomqtt.Client):
         self.watchers: dict[str, asyncio.Queue[Received]] = {}  # by exact topic, live too
         self.refused_topics: set[str] = set()  # publishes the broker refused (logged once)
         self.reached = False  # the socket (and TLS) connected and CONNECT was sent
+        self.last_acknowledgement = 0.0  # monotonic time of the broker's latest PUBACK/PUBCOMP
         self._client._handle_pubackcomp = self._acknowledgement  # type: ignore[method-assign,assignment]
 
     def _acknowledgement(self, kind: Literal["PUBACK", "PUBCOMP"]) -> MQTTErrorCode:
@@ -175,6 +177,7 @@ class Connection(aiomqtt.Client):
             level = logging.DEBUG if topic in self.refused_topics else logging.WARNING
             self.refused_topics.add(topic)
             _log.log(level, "the broker refused a publish to %s: %s", topic, reason_code)
+        self.last_acknowledgement = time.monotonic()
         super()._on_publish(client, userdata, mid, reason_code, properties)
 
     def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, *args: Any) -> None:
@@ -240,18 +243,19 @@ class Connection(aiomqtt.Client):
 
     async def acknowledged(self, acks: Acknowledgements) -> None:
         """Wait until the broker acknowledged every publish of ``acks`` (or the connection
-        was lost); aiomqtt.MqttError if it acknowledged none of them for ``TIMEOUT``
-        seconds. A broker that keeps acknowledging, however slowly (paho keeps 20 publishes
-        in flight), is waited for: a long burst to a slow broker is no lost connection."""
+        was lost); aiomqtt.MqttError if it acknowledged nothing at all, of any publish on
+        this connection, for ``TIMEOUT`` seconds. A broker that keeps acknowledging, however
+        slowly (paho keeps 20 publishes in flight), is waited for: a long burst to a slow
+        broker is no lost connection, nor is a publish queued behind such a burst."""
         try:
             acks.start()
             while acks.due > 0 and not self.lost:  # else woken already, or never
-                due = acks.due
+                waited = time.monotonic()
                 try:
                     async with asyncio.timeout(self.timeout):
                         await acks.wait()
                 except TimeoutError:
-                    if acks.due >= due:  # not one acknowledgement in all that time
+                    if self.last_acknowledgement < waited:  # not one in all that time
                         raise aiomqtt.MqttError("Operation timed out") from None
         finally:
             for mid in acks.mids:  # acknowledged ones are gone already

@@ -6,9 +6,15 @@ commands lost after a node failure)."""
 
 from __future__ import annotations
 
+import asyncio
+import time
+
 import pytest
 
 from bridge.app import Bridge
+from bridge.config import MqttConfig
+from bridge.mqtt import MqttClient, MqttDisconnectedError
+from bridge.mqtt import connection as connection_module
 from tests.integration.harness import eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.proxy import relayed
@@ -37,3 +43,32 @@ async def test_commands_are_served_while_the_state_waits_for_its_acknowledgement
             await send(mosquitto, "modbus/nastec_vasco/set", '{"start_stop": true}')
             await eventually(lambda: pump_writes(sim) == before + 1, 2 * LATE)
             await eventually(lambda: bridge.mqtt_state == "online", 3 * LATE)  # two round trips
+
+
+@pytest.mark.asyncio
+@pytest.mark.timeout(60)
+async def test_a_publish_behind_a_slowly_acknowledged_burst_waits_and_silence_ends_it(
+    mosquitto: Broker, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The broker's answers come 1.5 s late and paho keeps 20 publishes in flight: a single
+    publish handed over after a burst of 60 gets its own acknowledgement only after four
+    such round trips (6 s), three times the 2 s timeout. The broker acknowledged something
+    every 1.5 s meanwhile, so it is waited for (it ended the session: issue 27's slow-broker
+    test). A broker that acknowledges nothing at all times out as before."""
+    monkeypatch.setattr(connection_module, "TIMEOUT", 2.0)
+    async with relayed(mosquitto) as (relay, url):
+        config = MqttConfig(url=url, version="5", qos=1)
+        async with MqttClient(config, will_topic="slow/state", client_id="slow") as client:
+            relay.delay = 1.5
+            burst = asyncio.create_task(
+                client.publish_many((f"slow/{n}", b"x", True) for n in range(60))
+            )
+            await asyncio.sleep(0.1)  # handed to paho first: the single one queues behind
+            started = time.monotonic()
+            await client.publish("slow/last", b"y", retain=True)
+            waited = time.monotonic() - started
+            await burst
+            assert waited > 2 * connection_module.TIMEOUT  # longer than one timeout
+            relay.hold = True  # from now on no answer at all
+            with pytest.raises(MqttDisconnectedError, match="timed out"):
+                await client.publish("slow/unanswered", b"z")
