@@ -11,7 +11,9 @@ CPU: the peers workload of ``bench/peers.py`` (one Nastec VASCO, 40 registers on
 request every second, 20 ms per transaction, the simulator behind its relay in its own
 process) read by a bare pymodbus client that does nothing with the values (the floor of
 any bridge on pymodbus), then by this bridge with its defaults (publishing to a private
-mosquitto). CPU is utime + stime of the process over the window.
+mosquitto), then with ``mqtt.output: values`` (the peers bench's second config). CPU is
+utime + stime of the process over the window; ``--profile DIR`` runs each bridge under
+cProfile into ``DIR/<config>.prof`` (its figures then include the profiler's cost).
 
 Publish (issue 27): the cost of one plain value (``mqtt.output: values``) against paho's
 own. The peers workload's 40 values as plain topics (``modbus/pump/<key>``, retained, QoS
@@ -22,7 +24,7 @@ payloads made by ``plain_payload`` and the topics by ``Topics`` each burst, as
 ``StatePublisher`` does). CPU is ``time.process_time()`` of this one process around each;
 the two alternate, ``--rounds`` times, and the medians are printed.
 
-    .venv/bin/python bench/floor.py [--seconds 30]
+    .venv/bin/python bench/floor.py [--seconds 30] [--profile DIR]
     .venv/bin/python bench/floor.py publish [--rounds 3] [--bursts 250]
 """
 
@@ -133,7 +135,7 @@ async def cpu_of(argv: list[str], log: Path, seconds: float) -> float:
         return 100 * (cpu_seconds(child.pid) - before) / (time.monotonic() - start)
 
 
-async def cpu(folder: Path, seconds: float) -> None:
+async def cpu(folder: Path, seconds: float, profile: Path | None = None) -> None:
     port, log = free_port(), folder / "requests.log"
     serve = [sys.executable, str(Path(__file__).with_name("peers.py")), "serve", str(port)]
     broker = NodelayBroker(folder)
@@ -143,15 +145,20 @@ async def cpu(folder: Path, seconds: float) -> None:
             await listening([port])
             bare = [sys.executable, __file__, "client", str(port), str(seconds + WARMUP + 5)]
             floor = await cpu_of(bare, folder / "client.log", seconds)
-            config = write_configs(folder, broker.url, port, [UNIT])["bridge"]
-            run = [str(BRIDGE), "run", "-c", str(config), "--log-level", "warning"]
-            ours = await cpu_of(run, folder / "bridge.log", seconds)
+            configs = write_configs(folder, broker.url, port, [UNIT])
+            figures = [("pymodbus alone, values dropped", floor)]
+            for name, label in (("bridge", "this bridge"), ("bridge-values", "output: values")):
+                run = [str(BRIDGE), "run", "-c", str(configs[name]), "--log-level", "warning"]
+                if profile is not None:
+                    out = profile / f"{name}.prof"
+                    run = [sys.executable, "-m", "cProfile", "-o", str(out), *run]
+                figures.append((label, await cpu_of(run, folder / f"{name}.log", seconds)))
     finally:
         broker.stop()
     reads = sum(r.words for r in registers())
     print(f"| {reads} reads a second, {seconds:g} s window | CPU % of one core | per read, ms |")
     print("| --- | ---: | ---: |")
-    for label, figure in (("pymodbus alone, values dropped", floor), ("this bridge", ours)):
+    for label, figure in figures:
         print(f"| {label} | {figure:.2f} | {10 * figure / reads / PERIOD:.3f} |")
 
 
@@ -222,10 +229,11 @@ async def publish_cost(rounds: int, bursts: int) -> None:
         print(f"| {label} | {each} | {median:.0f} | {median / floor:.2f} |")
 
 
-async def main(seconds: float) -> None:
+async def main(seconds: float, profile: Path | None) -> None:
     with tempfile.TemporaryDirectory() as name:
-        memory(Path(name))
-        await cpu(Path(name), seconds)
+        if profile is None:
+            memory(Path(name))
+        await cpu(Path(name), seconds, profile)
 
 
 if __name__ == "__main__":
@@ -240,4 +248,6 @@ if __name__ == "__main__":
     else:
         parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
         parser.add_argument("--seconds", type=float, default=30.0)
-        asyncio.run(main(parser.parse_args().seconds))
+        parser.add_argument("--profile", type=Path, help="cProfile each bridge run into DIR")
+        options = parser.parse_args()
+        asyncio.run(main(options.seconds, options.profile))
