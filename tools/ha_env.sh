@@ -40,9 +40,22 @@ if compgen -G "/usr/local/share/ca-certificates/*.crt" >/dev/null; then
   run update-ca-certificates >/dev/null 2>&1
 fi
 
+# What the integrations the checks use require (mqtt: paho-mqtt; modbus: pymodbus), as their
+# manifests in that version name it. A running Home Assistant installs them itself when it
+# sets them up, but tools/check_ha_discovery.py imports the mqtt integration first.
+integration_requirements() {
+  run "/opt/ha-$1/bin/python" -c 'import json, pathlib, homeassistant.components as c
+for name in ("mqtt", "modbus"):
+    print(*json.loads((pathlib.Path(c.__file__).parent / name / "manifest.json").read_text())["requirements"])'
+}
+
 for version in "$@"; do
   venv=/opt/ha-$version
-  [ -f "$root$venv/.ready" ] && continue
+  if [ -f "$root$venv/.ready" ]; then
+    # shellcheck disable=SC2046
+    run "$venv/bin/pip" install --quiet $(integration_requirements "$version") $(pins_of "$version")
+    continue
+  fi
   python=$(python_of "$version")
   run test -x /usr/bin/"$python" || run sh -c \
     "apt-get -o Acquire::Check-Valid-Until=false update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $python $python-venv $python-dev >/dev/null"
@@ -52,5 +65,7 @@ for version in "$@"; do
   run "$venv/bin/pip" install --quiet --upgrade pip
   # shellcheck disable=SC2046
   run "$venv/bin/pip" install --quiet "homeassistant==$version" $(pins_of "$version")
+  # shellcheck disable=SC2046
+  run "$venv/bin/pip" install --quiet $(integration_requirements "$version") $(pins_of "$version")
   touch "$root$venv/.ready"
 done
