@@ -227,7 +227,7 @@ class DevicePoller:
             self._polled_once = True
         keys = self.state.keys_of(chosen)
         await check_torn(self.state, self.link, keys, plan, fresh)
-        self._decode(keys, fresh)
+        self._decode(self.state.sharing(keys), fresh)  # and the views of other classes
         if not self.first_poll_done and set(PollClass) <= chosen:
             self.first_poll_done = True  # units and limits read (or not there): say so once
             self._notify(frozenset())
