@@ -6,7 +6,10 @@ values of the writable entities they cover, so the write runs as an MQTT command
 gateway allows only under the rule of raw writes). Words that mean no value the entity is
 set to by exactly those words, an entity written in part, a toggle or pulse, a button's
 register with another word, and entity words mixed with raw ones raise
-``GatewayRefusalError`` with the exception code to answer; nothing is written then.
+``GatewayRefusalError`` with the exception code to answer; nothing is written then. On a
+register several writable entities share, every entity that takes the words is written
+(the writer sends the word once); one that does not take them is left out if another
+does.
 """
 
 from __future__ import annotations
@@ -36,14 +39,22 @@ def items_of(
 ) -> dict[str, object] | None:
     """The command a write of words amounts to: each writable entity whose words it writes,
     with the value those words mean; None when no word is a writable entity's (a raw write).
-    GatewayRefusalError: 0x03 for an entity written in part, a command word no button
-    sends, words that mean no value (``_value``); 0x01 for a toggle or pulse, and for
-    entities written with words no entity covers (raw, they would skip the checks)."""
+
+    A register several writable entities share (a raw word, a select, a switch with its
+    words): every entity that takes the words as a value of its own is in the command, so
+    every one's checks apply (range, guard, conditions) and the writer sends the word
+    once; one that reads them as no value of its own (a switch, for a mode word that is
+    neither its on nor its off) is left out, while another takes them. GatewayRefusalError:
+    0x03 for an entity written in part that no entity covers whole, a command word no
+    button sends, words no entity of the register takes (``_value``); 0x01 for a toggle or
+    pulse, and for entities written with words no entity covers (raw, they would skip the
+    checks)."""
     table = request.table
     cells: dict[Cell, int] = {(table, request.address + i): v for i, v in enumerate(request.values)}
     items: dict[str, object] = {}
     covered: set[Cell] = set()
     buttons: set[Cell] = set()
+    declined: list[tuple[set[Cell], GatewayRefusalError]] = []
     points = tuple(points)
     for point in points:
         entity = point.entity
@@ -51,13 +62,15 @@ def items_of(
         if not entity.writable or space is not table:
             continue
         mine = [(space, point.write_address + i) for i in range(point.count)]
-        hit = [c for c in mine if c in cells]
+        hit = {c for c in mine if c in cells}
         if not hit:
             continue
         if len(hit) != len(mine):
-            raise GatewayRefusalError(
+            error = GatewayRefusalError(
                 Code.ILLEGAL_VALUE, f"{point.key}: write its {len(mine)} registers at once"
             )
+            declined.append((hit, error))
+            continue
         if point.state_source is not None or entity.pulse:
             raise GatewayRefusalError(
                 Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
@@ -69,14 +82,21 @@ def items_of(
                 items[point.key] = COMMAND_PRESS
                 covered |= set(mine)
             continue
-        items[point.key] = _value(point, words, image)
+        try:
+            items[point.key] = _value(point, words, image)
+        except GatewayRefusalError as error:
+            declined.append((hit, error))
+            continue
         covered |= set(mine)
+    for hit, error in declined:  # taken by none of the entities sharing its registers
+        if not hit <= covered:
+            raise error
     missing = set(cells) - covered
     if missing & buttons:
         raise GatewayRefusalError(
             Code.ILLEGAL_VALUE, "no command of this register writes that word"
         )
-    _check_kept_bits(points, cells, covered, image)
+    _check_kept_bits([p for p in points if p.key in items], cells, covered, image)
     if missing and covered:  # raw, they would skip the entities' checks (range, spacing)
         raise GatewayRefusalError(
             Code.ILLEGAL_FUNCTION,
