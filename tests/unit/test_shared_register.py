@@ -9,10 +9,12 @@ from typing import Any
 
 import pytest
 
+from bridge.core.codec import decode
 from bridge.core.device_state import DeviceState
 from bridge.core.entity import Table
 from bridge.core.guard import Guard
 from bridge.core.request import Read, Write
+from bridge.core.simulation import build_movers, initial_image
 from bridge.core.timing import LinkTiming
 from bridge.errors import CommandRejectedError
 from bridge.modbus.writer import DeviceWriter
@@ -227,3 +229,23 @@ async def test_one_read_of_a_register_decodes_every_entity_on_it() -> None:
     assert state.sharing(["mode_raw"]) == MODE
     assert state.decode_fresh(state.sharing(["mode_raw"]), fresh) == set(MODE)
     assert state.values["mode"] == "feed_in" and state.values["backup"] is False
+
+
+async def test_the_simulator_holds_one_value_per_register_and_the_others_show_it() -> None:
+    """The select holds the mode word (not the raw number beside it, which would wander
+    as a measurement), the u32 its two words; every view decodes from them."""
+    entities = ENTITIES | {
+        "mode_raw": ENTITIES["mode_raw"] | {"access": "r", "ha": {"state_class": "measurement"}},
+        "energy_high": ENTITIES["energy_high"]
+        | {"access": "r", "ha": {"state_class": "measurement"}},
+    }
+    mapping = make_mapping(entities)
+    points = mapping.points({})
+    image = initial_image(mapping, points)
+    assert decode(points["mode"], image) == "self_use"
+    assert decode(points["mode_raw"], image) == 0
+    assert decode(points["backup"], image) is False
+    energy = decode(points["energy"], image)
+    assert isinstance(energy, int) and energy > 0
+    assert decode(points["energy_low"], image) == energy & 0xFFFF
+    assert not {m.point.key for m in build_movers(points, image)} & {"mode_raw", "energy_high"}
