@@ -225,9 +225,9 @@ class DevicePoller:
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
-        keys = self.state.keys_of(chosen)
+        keys = self.state.sharing(self.state.keys_of(chosen))  # and their registers' views
         await check_torn(self.state, self.link, keys, plan, fresh)
-        self._decode(self.state.sharing(keys), fresh)  # and the views of other classes
+        self._decode(keys, fresh)
         if not self.first_poll_done and set(PollClass) <= chosen:
             self.first_poll_done = True  # units and limits read (or not there): say so once
             self._notify(frozenset())
