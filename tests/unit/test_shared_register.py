@@ -8,6 +8,8 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bridge.core.codec import decode
 from bridge.core.device_state import DeviceState
@@ -249,3 +251,36 @@ async def test_the_simulator_holds_one_value_per_register_and_the_others_show_it
     assert isinstance(energy, int) and energy > 0
     assert decode(points["energy_low"], image) == energy & 0xFFFF
     assert not {m.point.key for m in build_movers(points, image)} & {"mode_raw", "energy_high"}
+
+
+VALUES = {  # what a command may ask of each view of the mode register
+    "mode_raw": st.integers(0, 3),
+    "mode": st.sampled_from(["self_use", "backup", "feed_in"]),
+    "backup": st.sampled_from(["ON", "OFF"]),
+    "bit_0": st.booleans(),
+}
+ASKED = {"ON": True, "OFF": False}
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    start=st.integers(0, 3),
+    command=st.dictionaries(
+        st.sampled_from(list(VALUES)), st.just(None), min_size=1, max_size=4
+    ).flatmap(lambda keys: st.fixed_dictionaries({k: VALUES[k] for k in keys})),
+)
+async def test_a_command_on_one_register_is_done_whole_or_not_at_all(
+    start: int, command: dict[str, object]
+) -> None:
+    """Whatever views of one register a command names: refused with nothing written, or
+    written so that every view it named reads what it asked (no key silently lost to
+    another's word)."""
+    device = Device({10: start})
+    try:
+        await device.write(**command)
+    except CommandRejectedError:
+        assert device.bus.registers[(H, 10)] == start
+        assert not [f for f in device.bus.frames if isinstance(f, Write)]
+        return
+    for key, value in command.items():
+        assert device.state.values[key] == ASKED.get(value, value)  # type: ignore[call-overload]
