@@ -66,10 +66,8 @@ def items_of(
         if not hit:
             continue
         if len(hit) != len(mine):
-            error = GatewayRefusalError(
-                Code.ILLEGAL_VALUE, f"{point.key}: write its {len(mine)} registers at once"
-            )
-            declined.append((hit, error))
+            part = f"{point.key}: write its {len(mine)} registers at once"
+            declined.append((hit, GatewayRefusalError(Code.ILLEGAL_VALUE, part)))
             continue
         if point.state_source is not None or entity.pulse:
             raise GatewayRefusalError(
@@ -84,13 +82,13 @@ def items_of(
             continue
         try:
             items[point.key] = _value(point, words, image)
-        except GatewayRefusalError as error:
-            declined.append((hit, error))
+        except GatewayRefusalError as refusal:
+            declined.append((hit, refusal))
             continue
         covered |= set(mine)
-    for hit, error in declined:  # taken by none of the entities sharing its registers
+    for hit, refused in declined:  # taken by none of the entities sharing its registers
         if not hit <= covered:
-            raise error
+            raise refused
     missing = set(cells) - covered
     if missing & buttons:
         raise GatewayRefusalError(
