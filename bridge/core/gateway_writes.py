@@ -15,6 +15,7 @@ does.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 
 from bridge.core.codec import COMMAND_PRESS, Value, decode, encode
 from bridge.core.entity import Table
@@ -51,41 +52,9 @@ def items_of(
     checks)."""
     table = request.table
     cells: dict[Cell, int] = {(table, request.address + i): v for i, v in enumerate(request.values)}
-    items: dict[str, object] = {}
-    covered: set[Cell] = set()
-    buttons: set[Cell] = set()
-    declined: list[tuple[set[Cell], GatewayRefusalError]] = []
     points = tuple(points)
-    for point in points:
-        entity = point.entity
-        space = Table.COIL if point.table is Table.COIL else Table.HOLDING
-        if not entity.writable or space is not table:
-            continue
-        mine = [(space, point.write_address + i) for i in range(point.count)]
-        hit = {c for c in mine if c in cells}
-        if not hit:
-            continue
-        if len(hit) != len(mine):
-            part = f"{point.key}: write its {len(mine)} registers at once"
-            declined.append((hit, GatewayRefusalError(Code.ILLEGAL_VALUE, part)))
-            continue
-        if point.state_source is not None or entity.pulse:
-            raise GatewayRefusalError(
-                Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
-            )
-        words = tuple(cells[c] for c in mine)
-        if entity.press is not None:
-            buttons |= set(mine)
-            if _presses(point, words, image):
-                items[point.key] = COMMAND_PRESS
-                covered |= set(mine)
-            continue
-        try:
-            items[point.key] = _value(point, words, image)
-        except GatewayRefusalError as refusal:
-            declined.append((hit, refusal))
-            continue
-        covered |= set(mine)
+    taken = _taken(points, cells, image)
+    items, covered, buttons, declined = taken.items, taken.covered, taken.buttons, taken.declined
     for hit, refused in declined:  # taken by none of the entities sharing its registers
         if not hit <= covered:
             raise refused
@@ -102,6 +71,51 @@ def items_of(
             "them on their own",
         )
     return None if missing else items
+
+
+@dataclass(slots=True)
+class _Taken:
+    """What the writable entities a request hits make of its words."""
+
+    items: dict[str, object] = field(default_factory=dict)  # key -> the value its words mean
+    covered: set[Cell] = field(default_factory=set)  # cells of the entities in ``items``
+    buttons: set[Cell] = field(default_factory=set)  # cells of the buttons hit
+    declined: list[tuple[set[Cell], GatewayRefusalError]] = field(default_factory=list)
+
+
+def _taken(points: tuple[Point, ...], cells: dict[Cell, int], image: Mapping[Cell, int]) -> _Taken:
+    """Each writable entity the words hit: its value, or why it does not take them (written
+    in part, no value of its own); a toggle or pulse refuses the request (0x01)."""
+    taken = _Taken()
+    for point in points:
+        entity = point.entity
+        space = Table.COIL if point.table is Table.COIL else Table.HOLDING
+        mine = [(space, point.write_address + i) for i in range(point.count)]
+        hit = {c for c in mine if c in cells}
+        if not entity.writable or not hit:
+            continue
+        if len(hit) != len(mine):
+            part = f"{point.key}: write its {len(mine)} registers at once"
+            taken.declined.append((hit, GatewayRefusalError(Code.ILLEGAL_VALUE, part)))
+            continue
+        if point.state_source is not None or entity.pulse:
+            raise GatewayRefusalError(
+                Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
+            )
+        words = tuple(cells[c] for c in mine)
+        if entity.press is not None:
+            taken.buttons |= set(mine)
+            if _presses(point, words, image):
+                taken.items[point.key] = COMMAND_PRESS
+                taken.covered |= set(mine)
+            continue
+        try:
+            taken.items[point.key] = _value(point, words, image)
+        except GatewayRefusalError as refusal:
+            taken.declined.append((hit, refusal))
+            continue
+        taken.covered |= set(mine)
+    return taken
 
 
 def _check_kept_bits(
