@@ -24,7 +24,9 @@ A ``Guard`` holds two sets of (table, wire address) cells:
   reverse, so it needs ``allow_dangerous_writes`` like the reverse-run command itself);
   each cell holds its raw floors, with whether the word is read signed.
 - ``hidden``: secret or write-only entities (a password), read raw by
-  ``bridge/request/device/read`` only when ``bridge.allow_raw_writes`` is on.
+  ``bridge/request/device/read`` only when ``bridge.allow_raw_writes`` is on; not a
+  write-only entity's register that a published entity reads too (a switch without
+  ``verify`` beside the sensor of its register).
 
 A device's guard only grows while the bridge runs: a reloaded mapping adds its own cells
 (``guard | Guard.of(points)``) but never removes one, so a mapping switched in at
@@ -90,6 +92,7 @@ class Guard:
                         _add(dangerous, guarded)
             if entity.secret or not entity.readable:
                 hidden |= written | _cells(point.table, point.address, point.count)
+        hidden -= _published(points)  # a write-only register another entity publishes
         return cls(dangerous, frozenset(hidden), words, floors, _harmless(points, dangerous))
 
     def __or__(self, other: Guard) -> Guard:
@@ -146,6 +149,25 @@ class Guard:
 
 
 UNGUARDED = Guard()
+
+
+def _published(points: list[Point]) -> set[Cell]:
+    """The cells a readable, not secret entity publishes, less any a secret reads or
+    writes (a secret stays hidden whatever else claims its register)."""
+    secret = {
+        cell
+        for p in points
+        if p.entity.secret
+        for start in (p.address, p.write_address)
+        for cell in _cells(p.table, start, p.count)
+    }
+    published = {
+        cell
+        for p in points
+        if p.entity.readable and not p.entity.secret
+        for cell in _cells(p.table, p.address, p.count)
+    }
+    return published - secret
 
 
 def _harmless(points: list[Point], dangerous: Mapping[Cell, int]) -> dict[Cell, frozenset[int]]:
