@@ -11,7 +11,7 @@
   their plausible rate (energy by the simulated power) and values that follow another
   (``simulate: {follows: KEY}``), deterministic for a seeded ``rng``.
 
-One piece, at about 540 lines, for now: the image and the movers share the helpers that
+One piece, at about 570 lines, for now: the image and the movers share the helpers that
 store a value at a point and keep limits consistent (``words_for``, ``number_range``, the
 limit roles, who owns a value). The seam, if it grows: the rules (``Quirks``, ``Rules``,
 ``build_rules``, ``read_limit_code``) share only ``Cell`` and could stand alone.

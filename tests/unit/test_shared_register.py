@@ -5,6 +5,7 @@ guarded register is no way around the guard (asked as a hostile MQTT client woul
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import pytest
@@ -15,6 +16,7 @@ from bridge.core.codec import decode
 from bridge.core.device_state import DeviceState
 from bridge.core.entity import Table
 from bridge.core.guard import Guard
+from bridge.core.planner import limits_for, plan_reads
 from bridge.core.request import Read, Write
 from bridge.core.simulation import build_movers, initial_image
 from bridge.core.timing import LinkTiming
@@ -284,3 +286,22 @@ async def test_a_command_on_one_register_is_done_whole_or_not_at_all(
         return
     for key, value in command.items():
         assert device.state.values[key] == ASKED.get(value, value)  # type: ignore[call-overload]
+
+
+async def test_the_planner_reads_a_shared_register_once_and_crossing_values_whole() -> None:
+    """Five views of one word, a u32 and its raw words: each register read once, each
+    value inside one read. Two u32 that cross (a mapping refuses them: the planner alone
+    is asked here) make one atom of three registers, never torn."""
+    points = SHARED.points({})
+    reads = plan_reads(list(points.values()), limits_for(SHARED)).reads
+    spans = [set(r.span) for r in reads]
+    for address in (10, 20, 30, 31):
+        assert sum(address in span for span in spans) == 1
+    for point in points.values():
+        if point.entity.readable:
+            assert any(set(point.span) <= span for span in spans), point.key
+    crossing = make_mapping({"a": {"name": "A", "address": 1, "type": "u32"}})
+    a = crossing.points({})["a"]
+    b = dataclasses.replace(a, key="b", address=2)
+    (read,) = plan_reads([a, b], limits_for(crossing)).reads
+    assert (read.address, read.count) == (1, 3)
