@@ -9,7 +9,10 @@ merges them into one atom), each decodes the image its own way. Each value takes
 What is refused is only what contradicts itself:
 
 - readers whose footprints cross (share bits, neither inside the other): a u32 starting
-  inside another value's registers (the classic off-by-one), bit fields 0-3 and 2-5;
+  inside another value's registers, bit fields 0-3 and 2-5. The planner could read them
+  (one atom of three registers, never torn), but no manual lays out two values sharing
+  half their registers: it is the classic off-by-one, caught here rather than published;
+  an imported package that has one gets it reported by name;
 - a secret beside a published reader of its register (the reader would publish it);
 - writers (at their write address) whose footprints cross: a write of one would change
   part of the other's value;
