@@ -1,5 +1,5 @@
 """Many entities on one register, end to end: a real Mosquitto, the simulator over TCP and
-`Bridge.run()`. A hybrid inverter's work mode is a raw word, a select, a switch with its
+`Bridge.run()`; and the gateway, another master writing the same registers. A hybrid inverter's work mode is a raw word, a select, a switch with its
 words and a read-only view on one holding register; its breaker word is a dangerous
 switch's, shared by a harmless raw number and a harmless reset button."""
 
@@ -21,6 +21,7 @@ from bridge.modbus.simulator import SimulatedUnit, Simulator
 from tests.integration.harness import cancel, eventually, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.test_bridge import Observer, observing
+from tests.integration.test_gateway_server import gateway_for, master
 
 pytestmark = pytest.mark.asyncio
 H = Table.HOLDING
@@ -155,3 +156,49 @@ async def test_a_switch_a_select_and_a_raw_word_on_one_register(
             assert sim.writes[written:] == [(UNIT, Write(6, H, BREAKER, (0x0300,)))]
         finally:
             await cancel(task)
+
+
+async def test_a_gateway_master_writes_a_shared_register_as_a_command_of_its_entities(
+    tmp_path: Path,
+) -> None:
+    """Another master's words to the work-mode register become a command of the entities
+    that take them (one frame on the line); to the breaker word, only the harmless reset
+    word passes the guard."""
+    path = tmp_path / "inverter.yaml"
+    path.write_text(yaml.safe_dump(MAPPING), encoding="utf-8")
+    sim = Simulator([SimulatedUnit(UNIT, load_mapping(path))])
+    sim.set_value(UNIT, "work_mode", "self_use")
+    sim.set_value(UNIT, "breaker_raw", 0x0200)
+    async with serving_tcp(sim) as port:
+        data = {
+            "bridge": {
+                "gateway": {
+                    "enabled": True,
+                    "port": 0,
+                    "allow_writes": True,
+                    "units": {1: "inverter"},
+                }
+            },
+            "buses": [{"id": "tcp", "transport": "tcp", "host": "127.0.0.1", "tcp_port": port}],
+            "devices": [{"id": "inverter", "bus": "tcp", "unit": UNIT, "mapping": "inverter.yaml"}],
+        }
+        async with gateway_for(data, tmp_path) as (gateway, engine), master(gateway) as client:
+            state = engine.devices["inverter"].state
+            await eventually(lambda: state.values.get("work_mode") == "self_use", 10)
+            written = len(sim.writes)
+            answer = await client.write_register(MODE, 2, device_id=UNIT)
+            assert not answer.isError()
+            assert sim.writes[written:] == [(UNIT, Write(6, H, MODE, (2,)))]
+            views = {k: state.values[k] for k in VIEWS}
+            assert views == {
+                "work_mode_raw": 2,
+                "work_mode": "feed_in",
+                "backup": False,
+                "feeding_in": True,
+            }
+            written = len(sim.writes)
+            for word in (0x0100, 0x0400):  # the breaker's ON word, any other word
+                assert (await client.write_register(BREAKER, word, device_id=UNIT)).isError()
+            assert sim.writes[written:] == []
+            assert not (await client.write_register(BREAKER, 0x0300, device_id=UNIT)).isError()
+            assert sim.writes[written:] == [(UNIT, Write(6, H, BREAKER, (0x0300,)))]
