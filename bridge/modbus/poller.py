@@ -239,7 +239,7 @@ class DevicePoller:
         reads = self.state.reads_for(wanted)
         await self._read_pass(reads, Priority.READ_NOW, fresh)
         await check_torn(self.state, self.link, [p.key for p in wanted], reads, fresh)
-        self._decode([p.key for p in wanted], fresh)
+        self._decode(self.state.sharing(p.key for p in wanted), fresh)
         return {p.key: self.values.get(p.key) for p in wanted}
 
     async def _read_pass(
