@@ -6,11 +6,12 @@ Each check returns rows ``entities.<key>.<field>: message``; ``check_mapping`` r
 so a user sees every problem of a file at once. The checks read the parts of a mapping
 they need (``MappingParts``), not the model: ``mapping.Mapping`` runs them when it
 validates, so it sits above this module.
+
+Which entities may share registers is decided in ``overlap``.
 """
 
 from __future__ import annotations
 
-import itertools
 import re
 import typing
 from collections.abc import Iterator
@@ -20,8 +21,9 @@ from pydantic import ValidationError
 
 from bridge.core.address import to_wire
 from bridge.core.convention import convention_problems
-from bridge.core.entity import Access, DataType, Entity, StateLink, Table
+from bridge.core.entity import DataType, Entity, StateLink
 from bridge.core.hass import presentation_problems
+from bridge.core.overlap import overlap_problems
 from bridge.core.protocol import OptionSpec, Protocol, write_function
 from bridge.core.variant import option_combinations, when_matches
 
@@ -54,7 +56,7 @@ def check_mapping(mapping: MappingParts) -> list[str]:
     for check in (_references, _function_codes, _sentinels, _presentation):
         rows.extend(check(mapping))
     if not basis:  # overlap checks need valid addresses and options, nothing else
-        rows.extend(_overlaps(mapping))
+        rows.extend(overlap_problems(mapping.protocol, mapping.options, mapping.entities))
     if mapping.status is not None and mapping.status not in mapping.entities:
         rows.append(f"status: no entity {mapping.status!r}")
     return rows
@@ -264,92 +266,3 @@ def _presentation(mapping: MappingParts) -> Iterator[str]:
                 continue  # reported by _options
             for problem in presentation_problems(applied):
                 yield f"entities.{key}.variants.{index}.ha: {problem}"
-
-
-def _overlaps(mapping: MappingParts) -> Iterator[str]:
-    seen: set[str] = set()
-    for chosen in option_combinations(mapping.options):
-        for row in _overlaps_for(mapping, chosen):
-            if row not in seen:
-                seen.add(row)
-                yield row
-
-
-def _overlaps_for(mapping: MappingParts, chosen: dict[str, str]) -> Iterator[str]:
-    rule = mapping.protocol.addressing
-    owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]] = {}
-    for key, e in mapping.entities.items():
-        if e.access is Access.WRITE or not when_matches(e.when, chosen):
-            continue
-        start = to_wire(e.address, rule)
-        for offset in range(e.register_count):
-            owners.setdefault((e.table, start + offset), []).append((key, e, start))
-    yield from _reserved_hits(mapping, owners)
-    yield from _segment_crossings(mapping, owners)
-    for (table, address), items in sorted(owners.items()):
-        for (k1, e1, s1), (k2, e2, s2) in itertools.combinations(items, 2):
-            problem = _clash(e1, s1, e2, s2)
-            if problem:
-                yield f"entities.{k2}.address: {problem} with {k1!r} at {table.value} {address}"
-
-
-def _clash(e1: Entity, s1: int, e2: Entity, s2: int) -> str | None:
-    """Why two readable entities on one address make no sense together, if they don't."""
-    if e1.on_when is not None or e2.on_when is not None:
-        return None  # a derived boolean view of a value, e.g. "protection enabled"
-    w1, w2 = e1.field_width, e2.field_width
-    if w1 is None and w2 is None:
-        return (
-            None if _code_and_label(e1, s1, e2, s2) else "a second whole value on the same register"
-        )
-    if e1.register_count > 1 or e2.register_count > 1 or s1 != s2:
-        return "a bit field inside a multi-register value"
-    if w1 is not None and w2 is not None:
-        bits1 = set(range(e1.bit or 0, (e1.bit or 0) + w1))
-        bits2 = set(range(e2.bit or 0, (e2.bit or 0) + w2))
-        if bits1 & bits2:
-            return "overlapping bit fields"
-    return None
-
-
-def _code_and_label(e1: Entity, s1: int, e2: Entity, s2: int) -> bool:
-    """A read-only code published twice: as its number and as the enum of its labels (a
-    fault code whose list the manual gives only in part)."""
-    return (
-        s1 == s2
-        and not e1.writable
-        and not e2.writable
-        and (e1.enum is None) != (e2.enum is None)
-        and e1.data_type is e2.data_type
-        and e1.register_count == e2.register_count
-        and e1.scale == e2.scale == 1.0
-        and e1.offset == e2.offset == 0.0
-    )
-
-
-def _reserved_hits(
-    mapping: MappingParts, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
-) -> Iterator[str]:
-    rule = mapping.protocol.addressing
-    for r in mapping.protocol.reserved:
-        start, end = to_wire(r.start, rule), to_wire(r.end or r.start, rule)
-        for address in range(start, end + 1):
-            for key, _, _ in owners.get((r.table, address), []):
-                yield f"entities.{key}.address: reads reserved {r.table.value} {address}"
-
-
-def _segment_crossings(
-    mapping: MappingParts, owners: dict[tuple[Table, int], list[tuple[str, Entity, int]]]
-) -> Iterator[str]:
-    rule = mapping.protocol.addressing
-    bounds = [
-        (s.table, to_wire(s.start, rule), to_wire(s.end, rule)) for s in mapping.protocol.segments
-    ]
-    for (table, address), items in owners.items():
-        for key, e, start in items:
-            if address != start:
-                continue
-            last = start + e.register_count - 1
-            for seg_table, low, high in bounds:
-                if seg_table is table and (low <= start <= high) != (low <= last <= high):
-                    yield f"entities.{key}.address: the value crosses a segment boundary"

@@ -41,6 +41,7 @@ from bridge.core.write_plan import stored
 from bridge.errors import MissingDataError
 
 NO_LIMIT = 0x10000  # more registers than any read asks for
+_KEPT = 64  # key sets whose sharers are kept (poll classes, a command's keys)
 
 
 class DeviceState:
@@ -79,6 +80,8 @@ class DeviceState:
         self._keys: dict[frozenset[PollClass], tuple[str, ...]] = {}
         self.published = frozenset(published(self.points))  # keys whose values go out
         self._limits: ReadLimits | None = None
+        self._readers: dict[Address, tuple[str, ...]] | None = None
+        self._sharing: dict[tuple[str, ...], tuple[str, ...]] = {}
 
     # --- plans -------------------------------------------------------------------------
 
@@ -116,6 +119,32 @@ class DeviceState:
                 k for k, p in self.points.items() if p.entity.poll_class in chosen
             )
         return self._keys[chosen]
+
+    def readers_of(self, cells: Iterable[Address]) -> tuple[str, ...]:
+        """The readable keys with a register (or bit) among ``cells``, in mapping order:
+        every entity a read or write of those registers concerns (a raw word, its switch,
+        its select, its bits)."""
+        if self._readers is None:
+            readers: dict[Address, list[str]] = {}
+            for key, point in self.points.items():
+                if point.entity.readable:
+                    for address in point.addresses:
+                        readers.setdefault(address, []).append(key)
+            self._readers = {address: tuple(keys) for address, keys in readers.items()}
+        found = {key for cell in cells for key in self._readers.get(cell, ())}
+        return tuple(key for key in self.points if key in found)
+
+    def sharing(self, keys: Iterable[str]) -> tuple[str, ...]:
+        """``keys`` and every readable key that shares a register with one of them (a
+        poll class's keys are asked each cycle: kept)."""
+        chosen = tuple(keys)
+        found = self._sharing.get(chosen)
+        if found is None:
+            cells = {a for k in chosen for a in self.points[k].addresses}
+            found = tuple(dict.fromkeys([*chosen, *self.readers_of(cells)]))
+            if len(self._sharing) < _KEPT:
+                self._sharing[chosen] = found
+        return found
 
     def reads_for(self, points: Iterable[Point]) -> tuple[Read, ...]:
         """The reads of these points (not kept: a read on request, a read back)."""

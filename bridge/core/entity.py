@@ -1,9 +1,10 @@
 """One entity of a mapping: where its value lives, how it is typed, and how Home Assistant shows it.
 
-An entity is a value a user sees (a sensor, a setting, an alarm bit, a command). Several
-entities may share a register: bit and nibble fields of one status word, or a whole word
-next to its bits. Field checks that need no other entity live here; cross-entity checks
-(references, overlaps, function codes) live in ``mapping.py``.
+An entity is a value a user sees (a sensor, a setting, an alarm bit, a command). Any
+number of entities may share a register: bit and nibble fields of one status word, a
+whole word next to its bits, a raw word beside its switch and select (``overlap``). Field
+checks that need no other entity live here; cross-entity checks (references, overlaps,
+function codes) live in ``checks.py`` and ``overlap.py``.
 
 One piece, at about 550 lines: it is the schema of a mapping file's entity, and a reader
 checking a row against it needs the field, its enum and its check side by side. The

@@ -6,12 +6,16 @@ values of the writable entities they cover, so the write runs as an MQTT command
 gateway allows only under the rule of raw writes). Words that mean no value the entity is
 set to by exactly those words, an entity written in part, a toggle or pulse, a button's
 register with another word, and entity words mixed with raw ones raise
-``GatewayRefusalError`` with the exception code to answer; nothing is written then.
+``GatewayRefusalError`` with the exception code to answer; nothing is written then. On a
+register several writable entities share, every entity that takes the words is written
+(the writer sends the word once); one that does not take them is left out if another
+does.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 
 from bridge.core.codec import COMMAND_PRESS, Value, decode, encode
 from bridge.core.entity import Table
@@ -36,47 +40,30 @@ def items_of(
 ) -> dict[str, object] | None:
     """The command a write of words amounts to: each writable entity whose words it writes,
     with the value those words mean; None when no word is a writable entity's (a raw write).
-    GatewayRefusalError: 0x03 for an entity written in part, a command word no button
-    sends, words that mean no value (``_value``); 0x01 for a toggle or pulse, and for
-    entities written with words no entity covers (raw, they would skip the checks)."""
+
+    A register several writable entities share (a raw word, a select, a switch with its
+    words): every entity that takes the words as a value of its own is in the command, so
+    every one's checks apply (range, guard, conditions) and the writer sends the word
+    once; one that reads them as no value of its own (a switch, for a mode word that is
+    neither its on nor its off) is left out, while another takes them. GatewayRefusalError:
+    0x03 for an entity written in part that no entity covers whole, a command word no
+    button sends, words no entity of the register takes (``_value``); 0x01 for a toggle or
+    pulse, and for entities written with words no entity covers (raw, they would skip the
+    checks)."""
     table = request.table
     cells: dict[Cell, int] = {(table, request.address + i): v for i, v in enumerate(request.values)}
-    items: dict[str, object] = {}
-    covered: set[Cell] = set()
-    buttons: set[Cell] = set()
     points = tuple(points)
-    for point in points:
-        entity = point.entity
-        space = Table.COIL if point.table is Table.COIL else Table.HOLDING
-        if not entity.writable or space is not table:
-            continue
-        mine = [(space, point.write_address + i) for i in range(point.count)]
-        hit = [c for c in mine if c in cells]
-        if not hit:
-            continue
-        if len(hit) != len(mine):
-            raise GatewayRefusalError(
-                Code.ILLEGAL_VALUE, f"{point.key}: write its {len(mine)} registers at once"
-            )
-        if point.state_source is not None or entity.pulse:
-            raise GatewayRefusalError(
-                Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
-            )
-        words = tuple(cells[c] for c in mine)
-        if entity.press is not None:
-            buttons |= set(mine)
-            if _presses(point, words, image):
-                items[point.key] = COMMAND_PRESS
-                covered |= set(mine)
-            continue
-        items[point.key] = _value(point, words, image)
-        covered |= set(mine)
+    taken = _taken(points, cells, image)
+    items, covered, buttons, declined = taken.items, taken.covered, taken.buttons, taken.declined
+    for hit, refused in declined:  # taken by none of the entities sharing its registers
+        if not hit <= covered:
+            raise refused
     missing = set(cells) - covered
     if missing & buttons:
         raise GatewayRefusalError(
             Code.ILLEGAL_VALUE, "no command of this register writes that word"
         )
-    _check_kept_bits(points, cells, covered, image)
+    _check_kept_bits([p for p in points if p.key in items], cells, covered, image)
     if missing and covered:  # raw, they would skip the entities' checks (range, spacing)
         raise GatewayRefusalError(
             Code.ILLEGAL_FUNCTION,
@@ -84,6 +71,51 @@ def items_of(
             "them on their own",
         )
     return None if missing else items
+
+
+@dataclass(slots=True)
+class _Taken:
+    """What the writable entities a request hits make of its words."""
+
+    items: dict[str, object] = field(default_factory=dict)  # key -> the value its words mean
+    covered: set[Cell] = field(default_factory=set)  # cells of the entities in ``items``
+    buttons: set[Cell] = field(default_factory=set)  # cells of the buttons hit
+    declined: list[tuple[set[Cell], GatewayRefusalError]] = field(default_factory=list)
+
+
+def _taken(points: tuple[Point, ...], cells: dict[Cell, int], image: Mapping[Cell, int]) -> _Taken:
+    """Each writable entity the words hit: its value, or why it does not take them (written
+    in part, no value of its own); a toggle or pulse refuses the request (0x01)."""
+    taken = _Taken()
+    for point in points:
+        entity = point.entity
+        space = Table.COIL if point.table is Table.COIL else Table.HOLDING
+        mine = [(space, point.write_address + i) for i in range(point.count)]
+        hit = {c for c in mine if c in cells}
+        if not entity.writable or not hit:
+            continue
+        if len(hit) != len(mine):
+            part = f"{point.key}: write its {len(mine)} registers at once"
+            taken.declined.append((hit, GatewayRefusalError(Code.ILLEGAL_VALUE, part)))
+            continue
+        if point.state_source is not None or entity.pulse:
+            raise GatewayRefusalError(
+                Code.ILLEGAL_FUNCTION, f"{point.key}: a toggle or pulse; use MQTT"
+            )
+        words = tuple(cells[c] for c in mine)
+        if entity.press is not None:
+            taken.buttons |= set(mine)
+            if _presses(point, words, image):
+                taken.items[point.key] = COMMAND_PRESS
+                taken.covered |= set(mine)
+            continue
+        try:
+            taken.items[point.key] = _value(point, words, image)
+        except GatewayRefusalError as refusal:
+            taken.declined.append((hit, refusal))
+            continue
+        taken.covered |= set(mine)
+    return taken
 
 
 def _check_kept_bits(

@@ -11,12 +11,22 @@ A ``Guard`` holds two sets of (table, wire address) cells:
   some words are guarded: a dangerous button there guards the word it writes (the P2's
   2000H takes "reverse run" 2 only with ``allow_dangerous_writes``, "stop" 6 always). A
   register only dangerous entities write is guarded whole, whatever the word.
+- ``harmless``: on a register a dangerous entity writes whole (a breaker word, a mode
+  register with a dangerous option), the words harmless buttons and switches there
+  declare (a reset button's word, a switch's ``words``), less any word a dangerous entity
+  there names too (a dangerous button's or switch's word, a dangerous select's codes):
+  those words may be written without ``allow_dangerous_writes``, any other word is
+  guarded for every writer of the register. So a harmless raw number or select sharing
+  the breaker word is no way around the guard: it writes only what the harmless switch
+  would.
 - ``floors``: registers where a value below a floor is guarded (``dangerous_below``: a
   negative speed reference of the P2's 1000H or the Vacon's 2003 runs the motor in
   reverse, so it needs ``allow_dangerous_writes`` like the reverse-run command itself);
   each cell holds its raw floors, with whether the word is read signed.
 - ``hidden``: secret or write-only entities (a password), read raw by
-  ``bridge/request/device/read`` only when ``bridge.allow_raw_writes`` is on.
+  ``bridge/request/device/read`` only when ``bridge.allow_raw_writes`` is on; not a
+  write-only entity's register that a published entity reads too (a switch without
+  ``verify`` beside the sensor of its register).
 
 A device's guard only grows while the bridge runs: a reloaded mapping adds its own cells
 (``guard | Guard.of(points)``) but never removes one, so a mapping switched in at
@@ -49,6 +59,7 @@ class Guard:
     hidden: frozenset[Cell] = frozenset()
     dangerous_words: Mapping[Cell, frozenset[int]] = field(default_factory=dict)
     floors: Mapping[Cell, frozenset[Floor]] = field(default_factory=dict)
+    harmless: Mapping[Cell, frozenset[int]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, points: Iterable[Point]) -> Guard:
@@ -81,7 +92,8 @@ class Guard:
                         _add(dangerous, guarded)
             if entity.secret or not entity.readable:
                 hidden |= written | _cells(point.table, point.address, point.count)
-        return cls(dangerous, frozenset(hidden), words, floors)
+        hidden -= _published(points)  # a write-only register another entity publishes
+        return cls(dangerous, frozenset(hidden), words, floors, _harmless(points, dangerous))
 
     def __or__(self, other: Guard) -> Guard:
         if not other:
@@ -93,6 +105,7 @@ class Guard:
             self.hidden | other.hidden,
             _merged(self.dangerous_words, other.dangerous_words, frozenset.union),
             _merged(self.floors, other.floors, frozenset.union),
+            _harmless_of_both(self, other),
         )
 
     def __bool__(self) -> bool:
@@ -117,9 +130,14 @@ class Guard:
             cell = (table, address + offset)
             bits = self.dangerous.get(cell)
             old = before.get(cell)
+            declared = bits == WHOLE and word in self.harmless.get(cell, ())
             if (
                 word in self.dangerous_words.get(cell, ())
-                or (bits is not None and (table.is_bits or old is None or (old ^ word) & bits))
+                or (
+                    bits is not None
+                    and not declared
+                    and (table.is_bits or old is None or (old ^ word) & bits)
+                )
                 or _below(word, self.floors.get(cell, ()))
             ):
                 changed.append(cell[1])
@@ -131,6 +149,76 @@ class Guard:
 
 
 UNGUARDED = Guard()
+
+
+def _published(points: list[Point]) -> set[Cell]:
+    """The cells a readable, not secret entity publishes, less any a secret reads or
+    writes (a secret stays hidden whatever else claims its register)."""
+    secret = {
+        cell
+        for p in points
+        if p.entity.secret
+        for start in (p.address, p.write_address)
+        for cell in _cells(p.table, start, p.count)
+    }
+    published = {
+        cell
+        for p in points
+        if p.entity.readable and not p.entity.secret
+        for cell in _cells(p.table, p.address, p.count)
+    }
+    return published - secret
+
+
+def _harmless(points: list[Point], dangerous: Mapping[Cell, int]) -> dict[Cell, frozenset[int]]:
+    """The words harmless buttons and switches declare on registers guarded whole, less
+    the words dangerous entities there name."""
+    declared: dict[Cell, set[int]] = {}
+    named: dict[Cell, set[int]] = {}
+    for point in points:
+        cell = (point.table, point.write_address)
+        if dangerous.get(cell) != WHOLE or point.count != 1:
+            continue
+        words = _declared_words(point)
+        target = named if point.entity.dangerous else declared
+        target.setdefault(cell, set()).update(words)
+    return {
+        cell: frozenset(words - named.get(cell, set()))
+        for cell, words in declared.items()
+        if words - named.get(cell, set())
+    }
+
+
+def _declared_words(point: Point) -> frozenset[int]:
+    """The words a whole-register button, switch or select writes (none for a number: it
+    writes any word of its range, which names none)."""
+    entity = point.entity
+    if point.table.is_bits or entity.bit is not None:
+        return frozenset()
+    if entity.press is not None:
+        return frozenset(w for write in encode(point, COMMAND_PRESS, {}) for w in write.values)
+    if entity.words is not None:
+        return frozenset({entity.words.write_on, entity.words.write_off})
+    if entity.data_type is DataType.BOOL:
+        return frozenset({0, 1})
+    if entity.enum is not None and entity.dangerous:
+        return frozenset(code & WHOLE for code in entity.enum)
+    return frozenset()
+
+
+def _harmless_of_both(first: Guard, second: Guard) -> dict[Cell, frozenset[int]]:
+    """A register either guard guards keeps only the words every guard guarding it
+    declares harmless (a reloaded mapping cannot add a harmless word)."""
+    cells = set(first.dangerous) | set(second.dangerous)
+    both: dict[Cell, frozenset[int]] = {}
+    for cell in cells:
+        allowed = [
+            g.harmless.get(cell, frozenset()) for g in (first, second) if cell in g.dangerous
+        ]
+        words = frozenset.intersection(*allowed)
+        if words:
+            both[cell] = words
+    return both
 
 
 def _floor(entity: Entity) -> Floor:

@@ -11,7 +11,7 @@
   their plausible rate (energy by the simulated power) and values that follow another
   (``simulate: {follows: KEY}``), deterministic for a seeded ``rng``.
 
-One piece, at about 540 lines, for now: the image and the movers share the helpers that
+One piece, at about 570 lines, for now: the image and the movers share the helpers that
 store a value at a point and keep limits consistent (``words_for``, ``number_range``, the
 limit roles, who owns a value). The seam, if it grows: the rules (``Quirks``, ``Rules``,
 ``build_rules``, ``read_limit_code``) share only ``Cell`` and could stand alone.
@@ -176,22 +176,38 @@ def _slots(points: AnyMapping[str, Point]) -> dict[str, int]:
 
 def _owns_value(point: Point, points: AnyMapping[str, Point]) -> bool:
     """False for write-only points, derived booleans, whole words that only show the bit
-    fields other points own (those follow from the fields), and a code's number beside its
-    enum of labels (the enum picks a code it knows)."""
+    fields other points own (those follow from the fields), and a whole value another
+    readable value on its registers shows better: a longer one (a u32 over its raw words),
+    else an enum (a code's number beside its labels, a raw mode word beside its select),
+    else a switch. The register holds one value; the others are views of it."""
     entity = point.entity
     if not entity.readable or entity.on_when is not None:
         return False
     if entity.field_width is not None:
         return True
-    return not any(
-        (
-            other.entity.field_width is not None
-            or (other.entity.enum is not None and other.entity.readable and entity.enum is None)
-        )
-        and other.table is point.table
-        and other.span == point.span
-        for other in points.values()
-    )
+    order = {key: index for index, key in enumerate(points)}
+    rank = _rank(point, order)
+    for other in points.values():
+        view = other.entity
+        if other is point or other.table is not point.table or not view.readable:
+            continue
+        if view.on_when is not None or not set(point.span) <= set(other.span):
+            continue
+        if view.field_width is not None:
+            if other.span == point.span:
+                return False
+        elif _rank(other, order) > rank:
+            return False
+    return True
+
+
+def _rank(point: Point, order: dict[str, int]) -> tuple[int, int, int]:
+    """Which whole value of a register holds it: the longest, then an enum, a switch with
+    its words, a boolean, a number; then the first in the mapping."""
+    entity = point.entity
+    kind = 3 if entity.enum is not None else 2 if entity.words is not None else 0
+    kind = kind or (1 if entity.kind == "bool" else 0)
+    return len(point.span), kind, -order.get(point.key, 0)
 
 
 def _limit_roles(points: AnyMapping[str, Point]) -> dict[str, str]:

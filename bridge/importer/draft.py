@@ -74,7 +74,7 @@ def mapping_document(
 
 def whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict[str, Any]:
     """The entities that pass the checks across entities (overlaps...); the rest noted: the
-    entity an error is about (``entities.<key>.``: the second of two on one register), else
+    entity an error is about (``entities.<key>.``: the second of two values that cross), else
     the entities it names, else all."""
     where = {d.name: d.node.where for d in drafts}
     for _ in range(len(entities) + 1):

@@ -225,7 +225,7 @@ class DevicePoller:
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if PollClass.ONCE in chosen and fresh:
             self._polled_once = True
-        keys = self.state.keys_of(chosen)
+        keys = self.state.sharing(self.state.keys_of(chosen))  # and their registers' views
         await check_torn(self.state, self.link, keys, plan, fresh)
         self._decode(keys, fresh)
         if not self.first_poll_done and set(PollClass) <= chosen:
@@ -239,7 +239,7 @@ class DevicePoller:
         reads = self.state.reads_for(wanted)
         await self._read_pass(reads, Priority.READ_NOW, fresh)
         await check_torn(self.state, self.link, [p.key for p in wanted], reads, fresh)
-        self._decode([p.key for p in wanted], fresh)
+        self._decode(self.state.sharing(p.key for p in wanted), fresh)
         return {p.key: self.values.get(p.key) for p in wanted}
 
     async def _read_pass(

@@ -24,7 +24,14 @@ from bridge.core.device_state import DeviceState
 from bridge.core.entity import Table
 from bridge.core.mapping import Point
 from bridge.core.request import Read, Write, WriteSequence
-from bridge.core.write_plan import dependencies, frames_of, stored, unchanged, undo_of
+from bridge.core.write_plan import (
+    contradictions,
+    dependencies,
+    frames_of,
+    stored,
+    unchanged,
+    undo_of,
+)
 from bridge.errors import (
     CommandExpiredError,
     CommandRejectedError,
@@ -135,8 +142,10 @@ class DeviceWriter:
                 self.counters.last_write[_written(point)] = time.monotonic()
             if point.entity.readable and point.entity.press is None:
                 self._publish_acknowledged(point, plan[point.key])
+        fresh: set[Address] = set()  # one read back serves every key of a register
         for point in written:
-            held[point.key] = await self._written_value(point, items[point.key])
+            held[point.key] = await self._written_value(point, items[point.key], fresh)
+        await self._read_back_sharers(written, plan, fresh)
         return {p.key: held[p.key] for p in points}
 
     def inherit(self, earlier: DeviceWriter) -> None:
@@ -172,11 +181,13 @@ class DeviceWriter:
         out. CommandRejectedError naming every refused key."""
         after: dict[Address, int] = dict(self.state.image)
         plan: dict[str, tuple[Write, ...]] = {}
+        asked: dict[str, tuple[Write, ...]] = {}  # unchanged ones too: for contradictions
         refused: dict[str, ValueRejectedError] = {}
         for point in points:
             entity = point.entity
             try:
                 writes = encode(point, items[point.key], after)
+                asked[point.key] = writes
                 self._check_unguarded(point, writes, after)
                 if not writes or (
                     entity.eeprom and entity.readable and unchanged(point, writes, after)
@@ -192,6 +203,8 @@ class DeviceWriter:
             plan[point.key] = writes
             for write in writes:
                 after |= stored(write)
+        for key, why in contradictions(points, asked).items():
+            refused.setdefault(key, ValueRejectedError(why))
         if refused:
             raise CommandRejectedError(refused, list(items))
         return plan
@@ -244,12 +257,30 @@ class DeviceWriter:
         except MissingDataError:
             return None
 
-    async def _written_value(self, point: Point, value: object) -> Value:
+    async def _written_value(self, point: Point, value: object, fresh: set[Address]) -> Value:
         if point.state_source is not None:  # a toggle: the state it flips, as read now
-            return await self._read_back(point.state_source)
+            return await self._read_back(point.state_source, fresh)
         if point.entity.verify and point.entity.readable:
-            return await self._read_back(point)
+            return await self._read_back(point, fresh)
         return _as_value(value) if point.entity.press is None else None
+
+    async def _read_back_sharers(
+        self, written: list[Point], plan: dict[str, tuple[Write, ...]], fresh: set[Address]
+    ) -> None:
+        """The other entities on the registers a verified write set (a raw word, a select
+        beside the switch written, or a write-only switch's register as a sensor reads
+        it) are read back too, with the registers read back already: each publishes what
+        the device holds now, not what it held before the write."""
+        cells = {
+            cell
+            for p in written
+            if p.entity.verify and p.state_source is None
+            for write in plan[p.key]
+            for cell in stored(write)
+        }
+        points = [self.state.points[k] for k in self.state.readers_of(cells)]
+        if points:
+            await self._read_back_keys(points, fresh)
 
     async def _report_partial(
         self, points: list[Point], partial: PartialWriteError
@@ -260,7 +291,7 @@ class DeviceWriter:
         now: dict[str, Value] = {}
         for point in readable:
             try:
-                now[point.key] = await self._read_back(point)
+                now[point.key] = await self._read_back(point, set())
             except ModbusError:
                 now[point.key] = None
         shown = ", ".join(f"{k}={v!r}" for k, v in now.items()) or "nothing readable"
@@ -279,7 +310,7 @@ class DeviceWriter:
             return
         written = {(w.table, w.address + i) for w in writes for i in range(len(w.values))}
         if {(point.table, a) for a in point.span} <= written:
-            self._decode([point.key], written)
+            self._decode(self.state.sharing([point.key]), written)
 
     def _check_allowed(self, point: Point) -> None:
         entity = point.entity
@@ -343,13 +374,18 @@ class DeviceWriter:
                     "that the write depends on"
                 )
 
-    async def _read_back(self, point: Point) -> Value:
+    async def _read_back(self, point: Point, fresh: set[Address]) -> Value:
+        """Read ``point`` (and its sign) unless this command's read backs read it already;
+        every entity sharing its registers is decoded from that read."""
         targets = [point] + ([point.sign] if point.sign is not None else [])
-        fresh: set[Address] = set()
-        for read in self.state.reads_for(targets):
-            await self.link.read_block(read, Priority.WRITE, fresh)
-        self._decode([point.key], fresh)
+        await self._read_back_keys(targets, fresh)
         return self.state.values.get(point.key)
+
+    async def _read_back_keys(self, targets: list[Point], fresh: set[Address]) -> None:
+        for read in self.state.reads_for(targets):
+            if not {(read.table, a) for a in read.span} <= fresh:
+                await self.link.read_block(read, Priority.WRITE, fresh)
+        self._decode(self.state.sharing(p.key for p in targets), fresh)
 
     def _decode(self, keys: Iterable[str], fresh: set[Address]) -> None:
         """Decode what was read or acknowledged fresh; pass on what changed."""

@@ -10,9 +10,11 @@ from typing import Any
 import pytest
 import yaml
 
-from bridge.core.codec import decode
+from bridge.core.codec import decode, encode
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping
+from bridge.core.planner import limits_for, plan_reads
+from bridge.core.request import Write
 from bridge.importer import ha_modbus
 from bridge.importer.ha_modbus import import_ha
 from bridge.importer.result import Import
@@ -311,3 +313,39 @@ def test_clamp_zero_suppress_and_a_switchs_words_are_converted(tmp_path: Path) -
         (16, "Coil.command_on"),
         (17, "Big.command_on"),
     ]
+
+
+PACKAGE = DATA / "ha_fixtures" / "hybrid_inverter_package.yaml"
+# switch key -> (address, command_on, command_off, words read as on, as off), as Home
+# Assistant's modbus switch writes (write_register, FC06) and reads them back (verify)
+PACKAGE_SWITCHES = {
+    "inverter_work_mode_backup": (3000, 1, 0, (1,), (0, 2)),
+    "inverter_export_limit": (3010, 1, 0, (1,), (0,)),
+    "inverter_backup_mode": (3020, 0x55AA, 0xAA55, (0x55AA, 0x55AB), (0xAA55,)),
+    "inverter_fan": (3040, 3, 0, (3,), (0,)),
+    "inverter_light": (3041, 1, 0, (1,), (0,)),
+}
+
+
+def test_a_packages_switches_on_its_sensors_registers_are_all_converted() -> None:
+    """A raw work-mode sensor and a switch on one register, an export-limit switch on a
+    register a sensor reads, a backup-mode switch with its own words and verify, a fan and
+    a light on registers sensors read: nothing is dropped, and each switch writes and reads
+    the words Home Assistant's modbus does."""
+    result = import_ha(load_source(PACKAGE), PACKAGE.name)
+    assert [n.key for n in result.notes if not n.partly] == []  # nothing dropped
+    assert {n.key for n in result.notes} == {"Inverter fan", "Inverter light"}  # now switches
+    mapping = only_mapping(result)
+    points = mapping.points({})
+    assert len(points) == 7 + 5
+    for key, (address, on, off, read_on, read_off) in PACKAGE_SWITCHES.items():
+        point = points[key]
+        assert (point.address, point.write_address) == (address, address)
+        assert encode(point, "ON", {}) == (Write(6, Table.HOLDING, address, (on,)),)
+        assert encode(point, "OFF", {}) == (Write(6, Table.HOLDING, address, (off,)),)
+        for word, state in [(w, True) for w in read_on] + [(w, False) for w in read_off]:
+            assert decode(point, {(Table.HOLDING, address): word}) is state
+        assert decode(point, {(Table.HOLDING, address): 0x1234}) is None  # neither: unknown
+    shared = {points["inverter_work_mode_raw"].address, points["inverter_export_limit_raw"].address}
+    reads = plan_reads(list(points.values()), limits_for(mapping)).reads
+    assert all(sum(a in r.span for r in reads) == 1 for a in shared)  # one read serves both

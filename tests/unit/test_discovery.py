@@ -45,6 +45,7 @@ from bridge.core.mapping import (
 from bridge.core.simulation import initial_image
 from bridge.core.topics import Topics
 from tests.factory import make_mapping
+from tests.unit.test_shared_register import ENTITIES, MODE
 
 TOPICS = Topics("modbus", "homeassistant")
 ORIGIN = Origin(sw_version="test")
@@ -1178,3 +1179,18 @@ def test_a_payload_admits_the_readings_inside_the_range_its_reading_widened() ->
     assert not admitted(points, sent, {"mode": "code_5"}, image)  # another unknown code
     assert not admitted(points, {}, {"ramp": 0}, image)  # nothing widened yet
     assert not admitted(points, sent, {"other": "code_4"}, image)  # not sent for that key
+
+
+def test_entities_on_one_register_are_each_their_own_component() -> None:
+    """A raw word, a select, a switch, a view and a bit of one register: one component
+    each, with its own unique id and platform (nothing is keyed by address)."""
+    cmps = _cmps({k: v for k, v in ENTITIES.items() if k in MODE})
+    platforms = {key: cmps[key]["platform"] for key in MODE}
+    assert platforms == {
+        "mode_raw": "number",
+        "mode": "select",
+        "backup": "switch",
+        "feeding_in": "binary_sensor",
+        "bit_0": "switch",
+    }
+    assert {cmps[key]["unique_id"] for key in MODE} == {f"modbus_dev_{key}" for key in MODE}

@@ -12,6 +12,8 @@ from bridge.core.codec import COMMAND_PRESS
 from bridge.core.gateway import Code, ProxyRequest
 from bridge.core.gateway_writes import GatewayRefusalError, items_of
 from bridge.core.mapping import load_mapping
+from tests.factory import make_mapping
+from tests.unit import test_shared_register as shared_register
 
 POINTS = load_mapping(Path(__file__).parents[2] / "mappings/soft_starter.yaml").points()
 UNIT = 3
@@ -57,3 +59,38 @@ def test_what_a_command_could_not_write_is_refused_whole(
     with pytest.raises(GatewayRefusalError) as refused:
         items_of(POINTS.values(), {}, request_)
     assert refused.value.code == code
+
+
+# --- a register several writable entities share ---------------------------------------------
+
+SHARED = shared_register.SHARED.points({})
+
+
+@pytest.mark.parametrize(
+    ("request_", "items"),
+    [
+        (write(10, 1), {"mode_raw": 1, "mode": "backup", "backup": True, "bit_0": True}),
+        (write(10, 2), {"mode_raw": 2, "mode": "feed_in", "bit_0": False}),  # backup: no 2
+        (write(10, 7), {"mode_raw": 7, "bit_0": True}),  # no option 7
+        (write(30, 5), {"energy_high": 5}),  # the u32's high word, as its raw word
+        (write(30, 0, 5), {"energy": 5, "energy_high": 0, "energy_low": 5}),
+        (write(20, 0x0400), {"breaker_raw": 0x0400, "breaker_command": "test"}),  # guarded later
+    ],
+)
+def test_every_entity_that_takes_the_words_is_in_the_command(
+    request_: ProxyRequest, items: dict[str, object]
+) -> None:
+    assert items_of(SHARED.values(), {}, request_) == items
+
+
+def test_words_no_entity_of_the_register_takes_are_refused() -> None:
+    points = make_mapping(
+        {
+            "mode": {"name": "Mode", "address": 1, "access": "rw", "enum": {0: "a", 1: "b"}},
+            "on": {"name": "On", "address": 1, "type": "bool", "access": "rw"},
+        }
+    ).points({})
+    assert items_of(points.values(), {}, write(1, 1)) == {"mode": "b", "on": True}
+    with pytest.raises(GatewayRefusalError) as refused:
+        items_of(points.values(), {}, write(1, 9))
+    assert refused.value.code == Code.ILLEGAL_VALUE

@@ -37,11 +37,34 @@ def test_secret_and_write_only_cells_are_hidden() -> None:
     assert secret and {a for t, a in guard.hidden if t is Table.HOLDING} >= secret
     readable = next(p for p in points if p.entity.readable and not p.entity.secret)
     assert guard.hidden_in(readable.table, readable.address, 1) == []
-    write_only = [p for p in points_of("soft_starter") if not p.entity.readable]
+    starter_points = points_of("soft_starter")
+    write_only = [p for p in starter_points if not p.entity.readable]
     assert write_only
-    starter = Guard.of(points_of("soft_starter"))
+    starter = Guard.of(starter_points)
+    published = {(p.table, a) for p in starter_points if p.entity.readable for a in p.span}
     for point in write_only:
-        assert starter.hidden_in(point.table, point.write_address, 1) == [point.write_address]
+        shown = (point.table, point.write_address) in published  # a run time its clear resets
+        hidden = [] if shown else [point.write_address]
+        assert starter.hidden_in(point.table, point.write_address, 1) == hidden
+    assert any((p.table, p.write_address) in published for p in write_only)
+
+
+def test_a_write_only_switch_beside_the_sensor_of_its_register_hides_nothing() -> None:
+    """Home Assistant's switch without verify and the sensor of its register: the value is
+    published anyway, raw reads of it are not refused; a secret stays hidden."""
+    guard = Guard.of(
+        make_mapping(
+            {
+                "mode": {"name": "Mode", "address": 5},
+                "mode_switch": {"name": "Mode switch", "address": 5, "type": "bool", "access": "w"},
+                "command": {"name": "Command", "address": 6, "access": "w"},
+                "password": {"name": "Password", "address": 7, "access": "w", "secret": True},
+            }
+        )
+        .points({})
+        .values()
+    )
+    assert guard.hidden_in(Table.HOLDING, 5, 3) == [6, 7]
 
 
 def test_a_guard_only_grows() -> None:

@@ -389,21 +389,76 @@ def test_reference_missing_for_some_options_is_an_error() -> None:
 @pytest.mark.parametrize(
     ("first", "second", "problem"),
     [
-        ({"address": 1}, {"address": 1}, "a second whole value on the same register"),
-        ({"address": 1, "type": "u32"}, {"address": 2}, "a second whole value"),
-        ({"address": 1, "type": "u32"}, {"address": 2, "bit": 0}, "a bit field inside a multi"),
-        ({"address": 1, "bit": 0, "width": 4}, {"address": 1, "bit": 3}, "overlapping bit fields"),
-        ({"address": 1, "table": "coil"}, {"address": 1, "table": "coil"}, "a second whole value"),
-        # a code and its labels: only both read-only, unscaled, of one type
-        ({"address": 1}, {"address": 1, "enum": {0: "a"}, "access": "rw"}, "a second whole"),
-        ({"address": 1, "scale": 0.1}, {"address": 1, "enum": {0: "a"}}, "a second whole value"),
-        ({"address": 1, "type": "s16"}, {"address": 1, "enum": {0: "a"}}, "a second whole value"),
-        ({"address": 1, "enum": {0: "b"}}, {"address": 1, "enum": {0: "a"}}, "a second whole"),
+        # readers whose values cross: neither inside the other
+        ({"address": 1, "type": "u32"}, {"address": 2, "type": "u32"}, "starts inside 'a'"),
+        ({"address": 1, "count": 4, "type": "ascii"}, {"address": 4, "type": "u32"}, "inside"),
+        ({"address": 1, "bit": 0, "width": 4}, {"address": 1, "bit": 3, "width": 2}, "bit fie"),
+        # a secret and a published view of it
+        ({"address": 1, "access": "rw", "secret": True}, {"address": 1}, "publish the secret"),
+        ({"address": 1}, {"address": 1, "access": "rw", "secret": True}, "publish the secret"),
     ],
 )
 def test_overlaps_that_make_no_sense(first: dict, second: dict, problem: str) -> None:
     rows = errors_of({"a": {"name": "A", **first}, "b": {"name": "B", **second}})
     assert len(rows) == 1 and rows[0].startswith("entities.b.address: ") and problem in rows[0]
+
+
+_SWITCH = {"type": "bool", "access": "rw"}
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "row"),
+    [
+        (  # a write of one changes half of the other
+            {"address": 1, "type": "u32", "access": "w"},
+            {"address": 2, "type": "u32", "access": "w"},
+            "entities.b.address: written across the writes of 'a': starts inside 'a'",
+        ),
+        (  # bit fields 0-3 and 3-4 of a command word
+            {"address": 1, "bit": 0, "width": 4, "access": "w"},
+            {"address": 1, "bit": 3, "width": 2, "access": "w"},
+            "entities.b.address: written across the writes of 'a': overlapping bit fields",
+        ),
+        (  # one option, two codes
+            {"address": 1, "enum": {0: "auto", 1: "backup"}, "access": "rw"},
+            {"address": 1, "enum": {0: "auto", 3: "backup"}, "access": "rw"},
+            "entities.b.enum: option 'backup' written as 3, as 1 by 'a'",
+        ),
+        (  # the same state read, written with other words
+            {"address": 1, **_SWITCH, "words": {"write_on": 1, "write_off": 0}},
+            {"address": 1, **_SWITCH, "words": {"write_on": 1, "write_off": 2, "read_off": [0]}},
+            "entities.b.words: writes 1/2 for on/off, 'a' 1/0 for the same words read",
+        ),
+    ],
+)
+def test_writers_that_contradict_each_other(first: dict, second: dict, row: str) -> None:
+    rows = errors_of({"a": {"name": "A", **first}, "b": {"name": "B", **second}})
+    assert len(rows) == 1 and rows[0].startswith(row), rows
+
+
+def test_many_entities_on_one_register() -> None:
+    """A raw mode word, a switch with its words, a select, a scaled reading, bit fields
+    and a u32 with its raw words: views of one value, as Home Assistant allows."""
+    make_mapping(
+        {
+            "mode_raw": {"name": "Mode raw", "address": 1},
+            "mode_scaled": {"name": "Mode scaled", "address": 1, "scale": 0.1},
+            "mode": {"name": "Mode", "address": 1, "enum": {0: "auto", 1: "backup"}, "access": "rw"},
+            "mode_again": {"name": "M2", "address": 1, "enum": {1: "backup", 2: "x"}, "access": "rw"},
+            "backup": {"name": "Backup", "address": 1, **_SWITCH, "words": {"write_on": 1, "write_off": 0}},
+            "force_charge": {"name": "FC", "address": 1, **_SWITCH, "words": {"write_on": 2, "write_off": 0}},
+            "raw_setting": {"name": "Raw setting", "address": 1, "access": "rw"},
+            "bit_0": {"name": "Bit 0", "address": 1, "bit": 0},
+            "bit_0_switch": {"name": "Bit 0 switch", "address": 1, "bit": 0, "access": "rw"},
+            "nibble": {"name": "Nibble", "address": 1, "bit": 0, "width": 4},
+            "energy": {"name": "Energy", "address": 10, "type": "u32", "access": "rw"},
+            "energy_high": {"name": "Energy high", "address": 10},
+            "energy_low": {"name": "Energy low", "address": 11, "access": "rw"},
+            "energy_low_bit": {"name": "Energy low bit", "address": 11, "bit": 15},
+            "command": {"name": "Command", "address": 20, "access": "w", "type": "bool"},
+            "command_word": {"name": "Command word", "address": 20},
+        }
+    )  # fmt: skip
 
 
 def test_overlaps_that_make_sense() -> None:
@@ -505,8 +560,8 @@ entities:
   speed: {name: Speed, address: 1, scale: zero}
   level: {name: Level, address: 2, unit_from: units}
   limit: {name: Limit, address: 3, max_from: speed}
-  state: {name: State, address: 4, enum: {0: stop, 1: run}}
-  twin: {name: Twin, address: 4, scale: 0.1}
+  state: {name: State, address: 4, type: u32}
+  twin: {name: Twin, address: 5, type: u32}
 """
     )
     with pytest.raises(MappingError) as caught:
@@ -514,7 +569,8 @@ entities:
     assert caught.value.issues == (
         "entities.speed.scale: Input should be a valid number, unable to parse string as a number",
         "entities.level.unit_from: no entity 'units'",
-        "entities.twin.address: a second whole value on the same register with 'state' at holding 4",
+        "entities.twin.address: starts inside 'state' and ends past it (an off-by-one? a u32 "
+        "takes two addresses) (holding 5)",
     )
 
 
@@ -558,10 +614,10 @@ def test_one_error_in_each_layer_is_reported_in_one_run(tmp_path: Path) -> None:
 entities:
   speed: {name: Speed, address: 1, scale: zero}
   temp: {name: Temperature, address: 2, bit: 3, type: u32}
-  level: {name: Level, address: 5}
-  twin: {name: Twin, address: 5}
+  level: {name: Level, address: 5, type: u32}
+  twin: {name: Twin, address: 6, type: u32}
   relay: {name: Relay, address: 6, table: coil}
-  mode: {name: Motor MODE, address: 7}
+  mode: {name: Motor MODE, address: 8}
 """
     )
     report = check_mapping_file(path)
@@ -571,8 +627,8 @@ entities:
         "entities.speed.scale: Input should be a valid number, unable to parse string as a number",
         "entities.temp: bit fields are taken from u16 registers",
         "entities.relay.table: reading coil needs function 1, which the device does not support",
-        "entities.twin.address: a second whole value on the same register with 'level' at "
-        "holding 5",
+        "entities.twin.address: starts inside 'level' and ends past it (an off-by-one? a u32 "
+        "takes two addresses) (holding 6)",
     )
     assert report.warnings == (
         "entities.mode.name: 'MODE' is written in capitals: write it as a word, or add the "

@@ -4,10 +4,19 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 from bridge.core.entity import Entity, Table
 from bridge.core.mapping import Point
 from bridge.core.request import Read, Write
-from bridge.core.write_plan import dependencies, frames_of, stored, unchanged, undo_of
+from bridge.core.write_plan import (
+    contradictions,
+    dependencies,
+    frames_of,
+    stored,
+    unchanged,
+    undo_of,
+)
 
 H, C = Table.HOLDING, Table.COIL
 
@@ -87,3 +96,42 @@ def test_the_undo_of_each_frame_puts_back_what_was_held_before_it() -> None:
 def test_no_undo_where_the_image_does_not_know_or_for_a_coil() -> None:
     writes = [Write(6, H, 99, (1,)), Write(16, H, 51, (5, 6)), Write(5, C, 1, (0xFF00,))]
     assert undo_of(writes, {(H, 51): 1}) == (None, None, None)
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "refused"),
+    [
+        # two bit fields of one word agree where they do not overlap
+        (({"bit": 0}, Write(6, H, 10, (0b01,))), ({"bit": 1}, Write(6, H, 10, (0b11,))), {}),
+        # a bit set, then the whole word without it
+        (({"bit": 0}, Write(6, H, 10, (1,))), ({}, Write(6, H, 10, (2,))), {"b": "a"}),
+        # the whole word, then a bit field that keeps it
+        (({}, Write(6, H, 10, (3,))), ({"bit": 1}, Write(6, H, 10, (3,))), {}),
+        # a switch's word and the raw word it is not
+        (({"type": "bool"}, Write(6, H, 10, (1,))), ({}, Write(6, H, 10, (0,))), {"b": "a"}),
+        # a u32 and its low word, agreeing or not
+        (({"type": "u32"}, Write(16, H, 10, (0, 5))), ({}, Write(6, H, 11, (5,))), {}),
+        (({"type": "u32"}, Write(16, H, 10, (0, 5))), ({}, Write(6, H, 11, (6,))), {"b": "a"}),
+        # one coil ON (the device's ON word) and OFF
+        (({"table": "coil"}, Write(5, C, 10, (0xFF00,))), ({"table": "coil"}, Write(5, C, 10, (0,))), {"b": "a"}),
+        # other registers: nothing to agree on
+        (({}, Write(6, H, 10, (1,))), ({}, Write(6, H, 12, (0,))), {}),
+    ],
+)  # fmt: skip
+def test_keys_of_one_command_that_ask_a_register_for_different_words(
+    first: tuple[dict[str, Any], Write], second: tuple[dict[str, Any], Write], refused: dict
+) -> None:
+    a = point("a", first[1].address, **first[0])
+    b = point("b", second[1].address, **second[0])
+    found = contradictions([a, b], {"a": (first[1],), "b": (second[1],)})
+    assert set(found) == set(refused)
+    for key, by in refused.items():
+        assert f"another value than {by} in the same command" in found[key]
+
+
+def test_a_u32_frame_holds_the_raw_words_beside_it() -> None:
+    whole = Write(16, H, 10, (1, 2))
+    plan = {"energy": (whole,), "low": (Write(6, H, 11, (2,)),), "high": (Write(6, H, 10, (1,)),)}
+    assert frames_of(plan, set()) == [whole]
+    pulsed = {"energy": (whole,), "kick": (Write(6, H, 11, (2,)), Write(6, H, 11, (0,)))}
+    assert frames_of(pulsed, {"kick"}) == [whole, *pulsed["kick"]]  # a pulse keeps its frames
