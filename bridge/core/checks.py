@@ -30,6 +30,7 @@ RESERVED_KEYS = frozenset(
     {"status", "alarms", "availability", "set", "get", "error", "event", "last_reset"}
 )
 _UNSIGNED_MAX = {DataType.U32: 0xFFFFFFFF, DataType.S32: 0xFFFFFFFF, DataType.F32: 0xFFFFFFFF}
+_UNSIGNED_MAX |= dict.fromkeys((DataType.U64, DataType.S64, DataType.F64), (1 << 64) - 1)
 
 
 class MappingParts(typing.Protocol):

@@ -36,7 +36,7 @@ from bridge.core.codec import (
     raw_bounds,
     scale_value,
 )
-from bridge.core.entity import Component, DataType, Entity, PollClass, StateLink
+from bridge.core.entity import Component, Entity, PollClass, StateLink
 from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
 from bridge.core.mapping import Point
 from bridge.core.topics import Topics
@@ -292,7 +292,7 @@ def numeric_sensor_options(key: str, entity: Entity, context: ComponentContext) 
         config["unit_of_measurement"] = unit
     if entity.ha.display_precision is not None:
         config["suggested_display_precision"] = entity.ha.display_precision
-    elif entity.data_type is not DataType.F32:  # a float has no fixed decimals
+    elif not entity.data_type.is_float:  # a float has no fixed decimals
         config["suggested_display_precision"] = entity.decimals
     return config
 

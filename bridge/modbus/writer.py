@@ -6,13 +6,15 @@ depend on (the word of a bit field, a sign register, limit registers, the curren
 of an EEPROM parameter) -> encode every key (type, range, enum, EEPROM rate limit; keys
 see the words the keys before them leave) -> one frame per word -> write ahead of polls,
 as one ``WriteSequence`` when there is more than one frame (undone if a later frame
-fails, finished before a stopping bus ends) -> publish what the unit acknowledged -> read
-back. Anything refused raises before a byte reaches the wire; one refused key refuses
-the whole command.
+fails, finished before a stopping bus ends) -> publish what the unit acknowledged -> wait
+the longest ``verify_delay`` of the keys (off the bus: polls and other devices go on) ->
+read back. Anything refused raises before a byte reaches the wire; one refused key
+refuses the whole command.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 from collections.abc import Iterable
@@ -135,6 +137,9 @@ class DeviceWriter:
                 self.counters.last_write[_written(point)] = time.monotonic()
             if point.entity.readable and point.entity.press is None:
                 self._publish_acknowledged(point, plan[point.key])
+        delay = max((p.entity.verify_delay or 0.0 for p in written), default=0.0)
+        if delay:  # the device acts before it reads back; the bus is not held meanwhile
+            await asyncio.sleep(delay)
         for point in written:
             held[point.key] = await self._written_value(point, items[point.key])
         return {p.key: held[p.key] for p in points}
