@@ -21,7 +21,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 
 from bridge.config import DeviceConfig
@@ -74,6 +74,8 @@ class DevicePoller:
         guard: Guard = UNGUARDED,
     ) -> None:
         self.device = device
+        if device.offline_after is not None:
+            policy = replace(policy, offline_after=device.offline_after)
         self.state = DeviceState(
             _with_overrides(mapping, device),
             device.options,
