@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import struct
+import sys
 from collections.abc import Mapping as AnyMapping
 from collections.abc import Sequence
 from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
@@ -169,6 +170,13 @@ def float_of(kind: DataType, bits: int) -> float | None:
             if struct.pack(form, candidate) == packed:
                 return candidate
     return number
+
+
+def float_limit(kind: DataType) -> float:
+    """The largest finite value a float register of ``kind`` holds."""
+    return {DataType.F16: 65504.0, DataType.F32: 3.4028234663852886e38}.get(
+        kind, sys.float_info.max
+    )
 
 
 def float_bits(kind: DataType, number: float) -> int:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from collections.abc import Callable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from bridge.core.codec import (
     COMMAND_PRESS,
     Image,
     Value,
+    float_limit,
     is_unknown_code,
     limits_of,
     raw_bounds,
@@ -348,8 +350,12 @@ def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[f
     without ``allow_dangerous_writes``, none below ``dangerous_below``. Widened to the value
     the device reads now (``context.readings``), which Home Assistant would drop as out of
     range otherwise; writes stay checked against the limits."""
-    raw_low, raw_high = raw_bounds(entity)
-    ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
+    if entity.data_type.is_float:  # the float's own range, scaled (never infinite)
+        top = min(float_limit(entity.data_type) * abs(entity.scale), sys.float_info.max)
+        ends = [entity.offset - top, entity.offset + top]
+    else:
+        raw_low, raw_high = raw_bounds(entity)
+        ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
     if entity.sign_from is not None:
         ends = [-ends[1], ends[1]]
     static = (
