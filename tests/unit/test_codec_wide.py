@@ -15,6 +15,8 @@ from pydantic import ValidationError
 
 from bridge.core.codec import decode, encode, raw_bounds
 from bridge.core.entity import Table
+from bridge.core.gateway import ProxyRequest
+from bridge.core.gateway_writes import GatewayRefusalError, items_of
 from bridge.core.mapping import Point
 from bridge.core.planner import ReadLimits, plan_reads
 from bridge.core.request import Write
@@ -219,3 +221,16 @@ def test_a_64_bit_value_is_never_torn(starts: list[int], limit: int, gaps: bool)
         assert len(holding) == 1
         (read,) = holding
         assert point.address + 4 <= read.address + read.count
+
+
+def test_a_gateway_master_writes_a_64_bit_value_whole_or_not_at_all() -> None:
+    """A master of the Modbus TCP gateway writing two of a u64's four registers is refused
+    (0x03): half a value is never written; all four are the value, exactly."""
+    points = make_mapping(
+        {"limit": {"name": "Limit", "address": 0, "type": "u64", "access": "rw"}}
+    ).points()
+    half = ProxyRequest(1, 16, 0, 2, (0x89AB, 0xCDEF))
+    with pytest.raises(GatewayRefusalError, match="write its 4 registers at once"):
+        items_of(points.values(), {}, half)
+    whole = ProxyRequest(1, 16, 0, 4, tuple(HA_WORDS))
+    assert items_of(points.values(), {}, whole) == {"limit": 0x89ABCDEF01234567}
