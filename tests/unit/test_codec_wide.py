@@ -183,6 +183,19 @@ def test_f16_round_trips(number: float) -> None:
 
 
 @pytest.mark.parametrize(
+    "protocol",
+    [
+        {"max_read_registers": 3},
+        {"segments": [{"name": "meter", "start": 0, "end": 9, "max_read_registers": 2}]},
+    ],
+)
+def test_a_64_bit_value_needs_reads_of_4_registers(protocol: dict[str, Any]) -> None:
+    with pytest.raises(ValidationError, match="a u64 is read whole, in one request of 4"):
+        make_mapping({"value": {"name": "Value", "address": 0, "type": "u64"}}, protocol=protocol)
+    make_mapping({"value": {"name": "Value", "address": 0, "type": "u32"}}, protocol=protocol)
+
+
+@pytest.mark.parametrize(
     ("fields", "message"),
     [
         ({"type": "f16", "enum": {0: "off"}}, "enum needs an integer type"),

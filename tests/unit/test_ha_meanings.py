@@ -108,3 +108,17 @@ async def test_the_first_request_after_each_connect_waits_connect_delay() -> Non
     assert sent[0] - opened[0] >= 0.2 * 0.99
     assert sent[2] - opened[1] >= 0.2 * 0.99
     assert sent[0] <= sent[1] < opened[1]
+
+
+def test_a_device_that_reads_fewer_than_4_registers_cannot_have_a_64_bit_value(
+    tmp_path: Path,
+) -> None:
+    mapping = tmp_path / "meter.yaml"
+    mapping.write_text(
+        "manufacturer: Test\nmodel: Meter\ndescription: x\nsource: {title: x}\n"
+        "entities:\n  energy: {name: Energy, address: 0, type: u64}\n",
+        encoding="utf-8",
+    )
+    device = DEVICE | {"mapping": str(mapping), "protocol": {"max_read_registers": 2}}
+    with pytest.raises(ConfigError, match="max_read_registers: 2 would read the 64-bit energy"):
+        load_config_data({"buses": [BUS], "devices": [device]}, tmp_path / "c.yaml")
