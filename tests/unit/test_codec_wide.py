@@ -247,3 +247,17 @@ def test_a_gateway_master_writes_a_64_bit_value_whole_or_not_at_all() -> None:
         items_of(points.values(), {}, half)
     whole = ProxyRequest(1, 16, 0, 4, tuple(HA_WORDS))
     assert items_of(points.values(), {}, whole) == {"limit": 0x89ABCDEF01234567}
+
+
+def test_where_reads_are_shorter_a_64_bit_value_is_left_out_never_cut() -> None:
+    """A limit learnt from the device (it refuses 4 registers): the u64 is named
+    unplannable; the u32 beside it is read as before."""
+    points = make_mapping(
+        {
+            "energy": {"name": "Energy", "address": 0, "type": "u64"},
+            "power": {"name": "Power", "address": 4, "type": "u32"},
+        }
+    ).points()
+    plan = plan_reads(points.values(), ReadLimits(max_registers=2))
+    assert plan.unplannable == ("energy",)
+    assert [(r.address, r.count) for r in plan.reads] == [(4, 2)]
