@@ -9,7 +9,7 @@ DEV    := $(VENV)/.installed-dev-$(SUM)
 RUN    := $(VENV)/.installed-demo-$(SUM)
 SOURCES := $(shell find bridge mappings -name '*.py' -o -name '*.yaml' -o -name py.typed)
 
-.PHONY: test test-cluster test-other-python test-ha check lint demo docs clean
+.PHONY: test test-cluster test-other-python test-ha check lint demo docs clean esphome
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -72,6 +72,26 @@ test-ha: $(DEV)
 		HA_ROOT=$(HA_ROOT) HA_VERSION=$$version \
 			$(BIN)/pytest -p no:cacheprovider -p no:xdist tests/ha -q -rs || exit 1; \
 	done
+
+# ESPHome's own config validation for the ESPHome import (tests/importer/
+# test_esphome_check.py, skipped saying so without it): ESPHome wants Python 3.12+ and
+# brings platformio (about 220 MB, 80 s to install), so it gets a venv of its own in the
+# machine-wide cache, made once by `make esphome` (.ci/run does) and found there by the
+# tests; the bridge never needs it at run time (`import esphome` runs the `esphome` on PATH).
+ESPHOME_VERSION ?= 2026.10.0
+ESPHOME_VENV    ?= $(HOME)/.cache/modbus-mqtt-bridge/esphome
+ESPHOME_PYTHON  ?= $(firstword $(wildcard /usr/bin/python3.13 /usr/bin/python3.12 \
+	$(HOME)/.pyenv/versions/3.13*/bin/python3.13 $(HOME)/.pyenv/versions/3.12*/bin/python3.12))
+
+esphome:
+ifeq ($(ESPHOME_PYTHON),)
+	@echo "esphome: no Python 3.12+ found (set ESPHOME_PYTHON); the ESPHome checks are skipped"
+else
+	$(ESPHOME_VENV)/bin/esphome version 2>/dev/null | grep -q ' $(ESPHOME_VERSION)$$' || { \
+		rm -rf $(ESPHOME_VENV) && $(ESPHOME_PYTHON) -m venv $(ESPHOME_VENV) && \
+		$(ESPHOME_VENV)/bin/pip install --quiet --upgrade pip && \
+		$(ESPHOME_VENV)/bin/pip install --quiet esphome==$(ESPHOME_VERSION); }
+endif
 
 check: $(DEV)
 	$(BIN)/ruff check .

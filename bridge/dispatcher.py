@@ -47,6 +47,8 @@ from bridge.errors import (
     ValueRejectedError,
 )
 from bridge.modbus.engine import Engine
+from bridge.modbus.poller import DevicePoller
+from bridge.modbus.writer import Later
 from bridge.mqtt import Message
 
 log = logging.getLogger(__name__)
@@ -139,34 +141,44 @@ class Dispatcher:
         self._spawn(self._execute(command), lambda reason: self._fail(command, reason))
 
     async def _execute(self, command: Command) -> None:
-        """Run one command in arrival order for its device, or drop it with an error."""
+        """Run one command in arrival order for its device, or drop it with an error; the
+        read back after a ``verify_delay`` comes after, the device's next command going on
+        meanwhile."""
+        later: Later = []
         try:
-            await self._run(command)
+            poller = await self._run(command, later)
         finally:
             self._waiting[command.device_id] -= 1
+        if later and poller is not None:
+            try:
+                await poller.writer.read_back_later(later)
+            except BridgeError as exc:
+                self._fail(command, f"written; the read back after its delay failed: {exc}")
 
-    async def _run(self, command: Command) -> None:
+    async def _run(self, command: Command, later: Later) -> DevicePoller | None:
+        """The command run under its device's lock; the poller that ran it."""
         device_id = command.device_id
         if device_id not in self.engine.devices:
             self._fail(command, "no such device")
-            return
+            return None
         async with self._locks.setdefault(device_id, asyncio.Lock()):
             poller = self.engine.devices[device_id]  # now: a mapping reload may have replaced it
             if command.expired(time.monotonic()):
                 poller.writes.expired += 1
                 self._fail(command, "expired: not executed within the command expiry")
-                return
+                return None
             if poller.health.online is False:
                 poller.writes.rejected += 1
                 self._fail(command, f"{device_id} is offline: nothing written")
-                return
+                return None
             try:
-                await poller.write_many(command.items, deadline=command.expires)
+                await poller.write_many(command.items, deadline=command.expires, later=later)
             except CommandRejectedError as exc:
                 for key, value in command.items.items():
                     self._error(device_id, key, value, exc.reason(key))
             except BridgeError as exc:
                 self._fail(command, str(exc))
+            return poller
 
     async def write_for(
         self, device_id: str, items: dict[str, object], deadline: float

@@ -18,6 +18,7 @@ import yaml
 
 from bridge.config import load_config
 from bridge.importer.esphome import import_esphome
+from bridge.importer.esphome_check import check_node
 from bridge.importer.ha_modbus import import_ha
 from bridge.importer.result import Import
 from bridge.importer.source import SourceError, load_source
@@ -60,6 +61,8 @@ def run_import(args: argparse.Namespace, out: TextIO) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     result = _IMPORTERS[args.tool](data, args.file.name)
+    if args.tool == "esphome":
+        check_node(args.file, data, result)  # ESPHome's own validation, when installed
     report = render_report(result)
     sys.stderr.write(report)
     if not result.usable:

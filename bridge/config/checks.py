@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from bridge.config.field import is_register_number
 from bridge.config.model import MIN_TOKEN
+from bridge.core.checks import wide_keys
 
 if TYPE_CHECKING:
     from bridge.config.model import DeviceConfig, ManagementConfig, WebConfig
@@ -114,6 +115,21 @@ def web_token_errors(web: WebConfig) -> list[str]:
     if len(token) < MIN_TOKEN:
         return [f"{where}: the token is missing or shorter than {MIN_TOKEN} characters"]
     return []
+
+
+def whole_read_errors(devices: Iterable[DeviceConfig], mappings: dict[str, Mapping]) -> list[str]:
+    """A device's ``max_read_registers`` below 4 where its mapping has a 64-bit number
+    (read whole, in one request of 4 registers)."""
+    errors: list[str] = []
+    for device in devices:
+        limit, mapping = device.protocol.max_read_registers, mappings.get(device.id)
+        wide = wide_keys(mapping.entities) if mapping is not None and limit is not None else []
+        if wide and limit is not None and limit < 4:
+            errors.append(
+                f"devices.{device.id}.protocol.max_read_registers: {limit} would read the "
+                f"64-bit {wide[0]} in parts; it is read whole, in one request of 4 registers"
+            )
+    return errors
 
 
 def device_password_errors(

@@ -21,6 +21,7 @@ from bridge.config.checks import (
     topic_errors,
     unique,
     web_token_errors,
+    whole_read_errors,
     with_ids,
 )
 from bridge.config.model import (
@@ -79,6 +80,7 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
     errors += secret_errors(config.mqtt)
     errors += web_token_errors(config.bridge.web)
     errors += device_password_errors(config.devices, mappings)
+    errors += whole_read_errors(config.devices, mappings)
     errors += topic_errors(config.mqtt, config.devices, mappings)
     errors += folder_errors(config.bridge, path.parent)
     if errors:

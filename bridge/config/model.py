@@ -33,6 +33,13 @@ class _BusBase(Strict):
     retries: int = Field(
         1, ge=0, le=5, description="resends of a write after a timeout (reads: next poll)"
     )
+    connect_delay: Duration = Field(
+        0.0,
+        ge=0,
+        le=60,
+        description="seconds of silence after each (re)connect before the first request (a "
+        "gateway or device that needs time after a connection; Home Assistant's hub delay)",
+    )
 
     @field_validator("id")
     @classmethod
@@ -117,6 +124,13 @@ class DeviceConfig(Strict):
         None, description="an environment variable holding the device password"
     )
     enabled: bool = True
+    offline_after: int | None = Field(
+        None,
+        ge=1,
+        le=100,
+        description="failed requests in a row before the device is offline (default 3); "
+        "Home Assistant's lazy_error_count N is N + 1",
+    )
     gateway_raw_writes: bool = Field(
         False,
         description="let masters of the Modbus TCP server (bridge.gateway, with allow_writes) "

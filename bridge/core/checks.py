@@ -32,6 +32,7 @@ RESERVED_KEYS = frozenset(
     {"status", "alarms", "availability", "set", "get", "error", "event", "last_reset"}
 )
 _UNSIGNED_MAX = {DataType.U32: 0xFFFFFFFF, DataType.S32: 0xFFFFFFFF, DataType.F32: 0xFFFFFFFF}
+_UNSIGNED_MAX |= dict.fromkeys((DataType.U64, DataType.S64, DataType.F64), (1 << 64) - 1)
 
 
 class MappingParts(typing.Protocol):
@@ -55,6 +56,8 @@ def check_mapping(mapping: MappingParts) -> list[str]:
     rows = [*_keys(mapping), *basis]
     for check in (_references, _function_codes, _sentinels, _presentation):
         rows.extend(check(mapping))
+    if not basis:  # the read limits at an address need valid addresses
+        rows.extend(_whole_reads(mapping))
     if not basis:  # overlap checks need valid addresses and options, nothing else
         rows.extend(overlap_problems(mapping.protocol, mapping.options, mapping.entities))
     if mapping.status is not None and mapping.status not in mapping.entities:
@@ -245,6 +248,36 @@ def _function_codes(mapping: MappingParts) -> Iterator[str]:
                 yield f"entities.{key}.write_function: {code} does not write {e.table.value}"
             if code in (5, 6) and e.register_count > 1:
                 yield f"entities.{key}.write_function: {code} writes one register only"
+
+
+def wide_keys(entities: AnyMapping[str, Entity]) -> list[str]:
+    """The readable 64-bit numbers: each is read whole, in one request of 4 registers
+    (no tear check joins words read apart, as for a two-register value)."""
+    return [
+        k
+        for k, e in entities.items()
+        if e.readable and e.register_count == 4 and e.kind == "number"
+    ]
+
+
+def _whole_reads(mapping: MappingParts) -> Iterator[str]:
+    """A 64-bit number where the device (or a segment) reads fewer than 4 registers."""
+    protocol, rule = mapping.protocol, mapping.protocol.addressing
+    for key in wide_keys(mapping.entities):
+        e = mapping.entities[key]
+        wire = to_wire(e.address, rule)
+        limits = [protocol.max_read_registers] + [
+            s.max_read_registers
+            for s in protocol.segments
+            if s.table is e.table
+            and s.max_read_registers is not None
+            and to_wire(s.start, rule) <= wire <= to_wire(s.end, rule)
+        ]
+        if min(limits) < e.register_count:
+            yield (
+                f"entities.{key}.type: a {e.data_type.value} is read whole, in one request of "
+                f"4 registers; the device reads at most {min(limits)} there"
+            )
 
 
 def _sentinels(mapping: MappingParts) -> Iterator[str]:

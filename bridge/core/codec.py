@@ -10,8 +10,10 @@ nothing is written (an enum is written by its labels only).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
+import sys
 from collections.abc import Mapping as AnyMapping
 from collections.abc import Sequence
 from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
@@ -62,14 +64,22 @@ def words_of(point: Point, image: Image) -> tuple[int, ...]:
 
 
 def join_words(words: Sequence[int], order: Order, radix: int = 65536) -> int:
-    """Combine two words (high word first for ``big``) into one unsigned integer."""
-    high, low = (words[0], words[1]) if order is Order.BIG else (words[1], words[0])
-    return high * radix + low
+    """Combine words (high word first for ``big``, last for ``little``: the words reversed,
+    Home Assistant's ``swap: word``) into one unsigned integer."""
+    number = 0
+    for word in words if order is Order.BIG else reversed(words):
+        number = number * radix + word
+    return number
 
 
-def split_words(number: int, order: Order, radix: int = 65536) -> tuple[int, int]:
-    high, low = divmod(number, radix)
-    return (high, low) if order is Order.BIG else (low, high)
+def split_words(number: int, order: Order, radix: int = 65536, count: int = 2) -> tuple[int, ...]:
+    """``count`` words of ``number``, in ``order`` (the inverse of ``join_words``)."""
+    words: list[int] = []
+    for _ in range(count - 1):
+        number, word = divmod(number, radix)
+        words.append(word)
+    words.append(number)  # the high word: a u32 of radix 10000 holds up to 65535 there
+    return tuple(reversed(words)) if order is Order.BIG else tuple(words)
 
 
 def _swap_bytes(word: int) -> int:
@@ -89,7 +99,7 @@ def _from_bytes(data: bytes, byte_order: Order) -> tuple[int, ...]:
 
 def unsigned_raw(entity: Entity, words: Sequence[int]) -> int:
     """The raw unsigned integer the words carry (before sign, field, scale)."""
-    if entity.register_count == 2:
+    if entity.register_count in (2, 4) and entity.data_type is not DataType.ASCII:
         ordered = _from_bytes(_to_bytes(words, entity.byte_order), Order.BIG)
         return join_words(ordered, entity.word_order, entity.word_radix)
     word = words[0]
@@ -105,6 +115,8 @@ def raw_bounds(entity: Entity) -> tuple[int, int]:
         DataType.S16: (-0x8000, 0x7FFF),
         DataType.U32: (0, 0xFFFF * entity.word_radix + entity.word_radix - 1),
         DataType.S32: (-0x80000000, 0x7FFFFFFF),
+        DataType.U64: (0, (1 << 64) - 1),
+        DataType.S64: (-(1 << 63), (1 << 63) - 1),
         DataType.BOOL: (0, 1),
     }.get(entity.data_type, (0, 0))
 
@@ -131,8 +143,8 @@ def decode(point: Point, image: Image) -> Value:
     unsigned = unsigned_raw(entity, words)
     if unsigned in entity.sentinels:
         return None
-    if kind is DataType.F32:
-        number = _shortest_f32(unsigned)
+    if kind.is_float:
+        number = float_of(kind, unsigned)
         return None if number is None else _scaled_float(entity, number)
     raw = _integer(entity, unsigned)
     if entity.kind == "number" and point.sign is not None and decode(point.sign, image):
@@ -140,17 +152,36 @@ def decode(point: Point, image: Image) -> Value:
     return _finish(entity, raw)
 
 
-def _shortest_f32(bits: int) -> float | None:
-    """The float32 as the shortest decimal that maps back to it (3.14, not 3.1400001)."""
-    packed = bits.to_bytes(4, "big")
-    number: float = struct.unpack(">f", packed)[0]
+# struct format, bytes and the significant digits that always read back the same float
+_FLOATS = {DataType.F16: (">e", 2, 5), DataType.F32: (">f", 4, 9), DataType.F64: (">d", 8, 17)}
+
+
+def float_of(kind: DataType, bits: int) -> float | None:
+    """The float ``bits`` hold as the shortest decimal that maps back to them (3.14, not
+    3.1400001); None for NaN and infinity (a value the device does not have)."""
+    form, size, most = _FLOATS[kind]
+    packed = bits.to_bytes(size, "big")
+    number: float = struct.unpack(form, packed)[0]
     if not math.isfinite(number):
         return None
-    for digits in range(6, 10):
+    for digits in range(3, most + 1):
         candidate = float(f"{number:.{digits}g}")
-        if struct.pack(">f", candidate) == packed:
-            return candidate
+        with contextlib.suppress(OverflowError):  # rounded up beyond the type's largest
+            if struct.pack(form, candidate) == packed:
+                return candidate
     return number
+
+
+def float_limit(kind: DataType) -> float:
+    """The largest finite value a float register of ``kind`` holds."""
+    return {DataType.F16: 65504.0, DataType.F32: 3.4028234663852886e38}.get(
+        kind, sys.float_info.max
+    )
+
+
+def float_bits(kind: DataType, number: float) -> int:
+    """The bits of ``number`` as a float of ``kind``; OverflowError beyond its range."""
+    return int.from_bytes(struct.pack(_FLOATS[kind][0], float(number)), "big")
 
 
 def _scaled_float(entity: Entity, number: float) -> float:
@@ -158,7 +189,8 @@ def _scaled_float(entity: Entity, number: float) -> float:
     then clamped and zero-suppressed."""
     if entity.scale != 1 or entity.offset != 0:
         exact = Decimal(repr(number)) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
-        number = float(f"{float(exact):.9g}")
+        digits = _FLOATS[entity.data_type][2]
+        number = float(f"{float(exact):.{digits}g}")
     if entity.clamp is None and entity.zero_suppress is None:
         return number
     return float(_shaped(entity, Decimal(repr(number))))
@@ -191,6 +223,8 @@ def _integer(entity: Entity, unsigned: int) -> int:
         return to_signed(unsigned, 16)
     if entity.data_type is DataType.S32:
         return to_signed(unsigned, 32)
+    if entity.data_type is DataType.S64:
+        return to_signed(unsigned, 64)
     return unsigned
 
 
@@ -217,11 +251,11 @@ def scale_value(entity: Entity, raw: int, shaped: bool = False) -> int | float:
 
 
 def unscale_value(entity: Entity, value: float) -> int:
-    """(value - offset) / scale rounded half away from zero: 4.5 bar at 0.1 -> 45, not 44."""
+    """(value - offset) / scale rounded half away from zero: 4.5 bar at 0.1 -> 45, not 44.
+    An integer is taken exactly (a 64-bit value beyond a float's 53 bits)."""
+    given = Decimal(value) if isinstance(value, int) else Decimal(repr(float(value)))
     try:
-        exact = (Decimal(repr(float(value))) - Decimal(repr(entity.offset))) / Decimal(
-            repr(entity.scale)
-        )
+        exact = (given - Decimal(repr(entity.offset))) / Decimal(repr(entity.scale))
     except InvalidOperation:
         raise ValueRejectedError(f"{_shown(value)} is not a finite number") from None
     return int(exact.to_integral_value(ROUND_HALF_UP))
@@ -271,15 +305,15 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
     kind = entity.data_type
     if kind is DataType.ASCII:
         return (_register_write(point, _encode_text(entity, value)),)
-    if kind is DataType.F32:
+    if kind.is_float:
         number = _unscaled_float(entity, _number(point, value, image))
         try:
-            packed = struct.unpack(">HH", struct.pack(">f", number))
+            bits = float_bits(kind, number)
         except OverflowError:
             raise ValueRejectedError(
-                f"{point.key}: {_shown(value)} does not fit a float32"
+                f"{point.key}: {_shown(value)} does not fit a {kind.value} float"
             ) from None
-        return (_register_write(point, _ordered(entity, join_words(packed, Order.BIG))),)
+        return (_register_write(point, _ordered(entity, bits)),)
     raw = _raw_for(point, value, image)
     if kind is DataType.BOOL and point.table.is_bits:
         return _coil_writes(point, raw)
@@ -298,8 +332,7 @@ def encode(point: Point, value: object, image: Image) -> tuple[Write, ...]:
                 + encode_field(point, 0, image, after=1)
             )
         return tuple(writes) + encode_field(point, raw, image)
-    bits = 32 if entity.register_count == 2 else 16
-    unsigned = raw & ((1 << bits) - 1)  # two's complement for signed types
+    unsigned = raw & ((1 << (16 * entity.register_count)) - 1)  # two's complement for signed types
     if unsigned in entity.sentinels:
         raise ValueRejectedError(f"{point.key}: {_shown(value)} is the device's 'unknown' marker")
     writes.append(_register_write(point, _ordered(entity, unsigned)))
@@ -395,6 +428,17 @@ def _number(point: Point, value: object, image: Image) -> float:
     low, high = limits_of(point, image)
     if (low is not None and number < low) or (high is not None and number > high):
         raise ValueRejectedError(f"{point.key}: {_shown(value)} is outside {low}..{high}")
+    return _exact(value, number)
+
+
+def _exact(value: int | float | str, number: float) -> float:
+    """An integer given (or written as digits) as it is, else ``number``: a 64-bit value is
+    written to the last unit, not rounded to a float's 53 bits (an int is a float here)."""
+    if isinstance(value, int):
+        return value
+    text = value.strip() if isinstance(value, str) else ""
+    if text.lstrip("+-").isdigit() and len(text) <= 40:
+        return int(text)
     return number
 
 
@@ -412,8 +456,9 @@ def _encode_text(entity: Entity, value: object) -> tuple[int, ...]:
 
 
 def _ordered(entity: Entity, unsigned: int) -> tuple[int, ...]:
-    if entity.register_count == 2:
-        words = split_words(unsigned, entity.word_order, entity.word_radix)
+    count = entity.register_count
+    if count > 1:
+        words = split_words(unsigned, entity.word_order, entity.word_radix, count)
         return _from_bytes(_to_bytes(words, Order.BIG), entity.byte_order)
     return (_swap_bytes(unsigned) if entity.byte_order is Order.LITTLE else unsigned,)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from collections.abc import Callable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
@@ -31,12 +32,13 @@ from bridge.core.codec import (
     COMMAND_PRESS,
     Image,
     Value,
+    float_limit,
     is_unknown_code,
     limits_of,
     raw_bounds,
     scale_value,
 )
-from bridge.core.entity import Component, DataType, Entity, PollClass, StateLink
+from bridge.core.entity import Component, Entity, PollClass, StateLink
 from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
 from bridge.core.mapping import Point
 from bridge.core.topics import Topics
@@ -292,7 +294,7 @@ def numeric_sensor_options(key: str, entity: Entity, context: ComponentContext) 
         config["unit_of_measurement"] = unit
     if entity.ha.display_precision is not None:
         config["suggested_display_precision"] = entity.ha.display_precision
-    elif entity.data_type is not DataType.F32:  # a float has no fixed decimals
+    elif not entity.data_type.is_float:  # a float has no fixed decimals
         config["suggested_display_precision"] = entity.decimals
     return config
 
@@ -348,8 +350,12 @@ def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[f
     without ``allow_dangerous_writes``, none below ``dangerous_below``. Widened to the value
     the device reads now (``context.readings``), which Home Assistant would drop as out of
     range otherwise; writes stay checked against the limits."""
-    raw_low, raw_high = raw_bounds(entity)
-    ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
+    if entity.data_type.is_float:  # the float's own range, scaled (never infinite)
+        top = min(float_limit(entity.data_type) * abs(entity.scale), sys.float_info.max)
+        ends = [entity.offset - top, entity.offset + top]
+    else:
+        raw_low, raw_high = raw_bounds(entity)
+        ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
     if entity.sign_from is not None:
         ends = [-ends[1], ends[1]]
     static = (

@@ -46,15 +46,25 @@ class Table(StrEnum):
 
 
 class DataType(StrEnum):
-    """Register types. 32-bit types span two registers; ``ascii`` spans ``count``."""
+    """Register types. 32-bit types span two registers, 64-bit types four (``word_order``
+    little: the four words in reverse, Home Assistant's ``swap: word``); ``f16`` is a
+    half-precision float in one register; ``ascii`` spans ``count``."""
 
     U16 = "u16"
     S16 = "s16"
     U32 = "u32"
     S32 = "s32"
     F32 = "f32"
+    F16 = "f16"
+    U64 = "u64"
+    S64 = "s64"
+    F64 = "f64"
     ASCII = "ascii"
     BOOL = "bool"
+
+    @property
+    def is_float(self) -> bool:
+        return self in (DataType.F16, DataType.F32, DataType.F64)
 
 
 class Access(StrEnum):
@@ -97,6 +107,7 @@ class Order(StrEnum):
 _STATE_CLASSES = ("measurement", "measurement_angle", "total", "total_increasing")
 _CATEGORIES = ("config", "diagnostic")
 _WIDTH = {DataType.U32: 2, DataType.S32: 2, DataType.F32: 2}
+_WIDTH |= {DataType.U64: 4, DataType.S64: 4, DataType.F64: 4}
 _UNKNOWN_LABEL = re.compile(r"^code_-?\d+$")  # codec.unknown_code
 
 
@@ -317,6 +328,13 @@ class Entity(BaseModel):
     press: bool | int | float | str | None = Field(None, description="value a button writes")
     pulse: bool = Field(False, description="write the bit 1 then 0 (rising-edge commands)")
     verify: bool = Field(True, description="read back after a write")
+    verify_delay: Duration | None = Field(
+        None,
+        gt=0,
+        le=60,
+        description="wait this long after a write before reading it back (a device that "
+        "takes time to act; Home Assistant's verify delay); the bus serves others meanwhile",
+    )
     idempotent: bool = Field(True, description="false: never retried after a timeout (toggles)")
     toggle_of: str | None = Field(
         None,
@@ -566,7 +584,7 @@ def _check_words(e: Entity) -> str | None:
 def _check_enum(e: Entity) -> str | None:
     if e.enum is None:
         return None
-    if e.data_type in (DataType.ASCII, DataType.F32):
+    if e.data_type is DataType.ASCII or e.data_type.is_float:
         return "enum needs an integer type"
     labels = list(e.enum.values())
     if len(set(labels)) != len(labels):
@@ -595,6 +613,8 @@ def _check_write(e: Entity) -> str | None:
         return "a write-only entity cannot be an alarm"
     if (e.requires or e.write_interval is not None) and not e.writable:
         return "requires/write_interval describe writes; the entity is read-only"
+    if e.verify_delay is not None and not (e.writable and e.readable and e.verify):
+        return "verify_delay delays the read back of a readable, written entity (verify on)"
     if e.toggle_of is not None and (
         e.table is not Table.COIL or e.access is not Access.WRITE or e.press is not None or e.pulse
     ):

@@ -11,7 +11,9 @@ readable gaps, never crosses a segment boundary, never exceeds the segment's (el
 device's) max count. An atom is never split across reads, so a u32 is never torn, UNLESS
 it is longer than that max (Nastec: one register per read): it is then cut into single
 registers that group like any other atoms, which reads it in limit-sized chunks from its
-first register (the 6-register Nastec MAC address takes six reads).
+first register (the 6-register Nastec MAC address takes six reads). A 64-bit number is
+never cut (no tear check joins four words): where reads are shorter (a limit learnt from
+the device) it is left out, named in ``Plan.unplannable``.
 
 ``plan_reads`` is exact: dynamic programming over the sorted atoms of each table (blocks
 are contiguous runs of atoms; reading an atom twice never pays). A hole is read through
@@ -191,6 +193,7 @@ def _units(
 ) -> tuple[list[_Unit], set[str]]:
     """The DP units of one table's points, and the keys of points no read can fetch."""
     lost = {p.key for p in points if any((table, a) in limits.unreadable for a in p.span)}
+    lost |= {p.key for p in points if _wide(p) and _too_long(table, p, limits)}
     units: list[_Unit] = []
     for start, stop, keys in _atoms(p for p in points if p.key not in lost):
         place = _region(table, start, stop, limits)
@@ -203,6 +206,16 @@ def _units(
         else:
             units += [_Unit(a, a + 1, region, limit) for a in range(start, stop)]
     return units, lost
+
+
+def _wide(point: Point) -> bool:
+    """A 64-bit number: read whole or not at all (no tear check joins four words)."""
+    return point.count == 4 and point.entity.kind == "number"
+
+
+def _too_long(table: Table, point: Point, limits: ReadLimits) -> bool:
+    place = _region(table, point.address, point.address + point.count, limits)
+    return place is not None and place[1] < point.count
 
 
 def _atoms(points: Iterable[Point]) -> list[tuple[int, int, tuple[str, ...]]]:

@@ -252,8 +252,8 @@ def number_range(point: Point) -> tuple[float, float]:
     """Engineering range a number can take: its register, narrowed by static min/max and
     by physics (a power factor is within -1..1, or -100..100 %)."""
     entity = point.entity
-    if entity.data_type is DataType.F32:
-        low, high = -1e6, 1e6
+    if entity.data_type.is_float:  # a half float reaches 65504 only
+        low, high = (-6e4, 6e4) if entity.data_type is DataType.F16 else (-1e6, 1e6)
     else:
         ends = [scale_value(entity, raw) for raw in raw_bounds(entity)]
         low, high = min(ends), max(ends)

@@ -1,11 +1,11 @@
 """One ESPHome ``platform: modbus_controller`` item as mapping entities.
 
 ``register_type`` is the table (``read`` = input registers), ``value_type`` the type and
-word order (``_R``: low word first), ``bitmask`` a bit field (shifted down to its lowest
-bit, as ESPHome does), the ``multiply``/``offset`` filters scale and offset, in their
-order; ``lambda``, ``write_lambda``, ``custom_command`` and every other filter are
-reported, never guessed. The entity asks Home Assistant for the id ESPHome's entity had:
-``<node>_<name>``.
+word order (``_R``: low word first; of a QWORD, the four words reversed), ``bitmask`` a
+bit field (shifted down to its lowest bit, as ESPHome does), the ``multiply``/``offset``
+filters scale and offset, in their order; ``lambda``, ``write_lambda``,
+``custom_command`` and every other filter are reported, never guessed. The entity asks
+Home Assistant for the id ESPHome's entity had: ``<node>_<name>``.
 """
 
 from __future__ import annotations
@@ -25,6 +25,10 @@ _TYPES = {  # value_type -> (type, word order)
     "S_DWORD_R": ("s32", "little"),
     "FP32": ("f32", "big"),
     "FP32_R": ("f32", "little"),
+    "U_QWORD": ("u64", "big"),
+    "S_QWORD": ("s64", "big"),
+    "U_QWORD_R": ("u64", "little"),  # the four words in reverse
+    "S_QWORD_R": ("s64", "little"),
 }
 _KEPT = {"platform", "modbus_controller_id", "id", "name", "address", "register_type"}
 _KEPT |= {"value_type", "bitmask", "skip_updates", "unit_of_measurement", "device_class"}
@@ -84,7 +88,7 @@ def _shape(platform: str, draft: Draft, result: Import) -> bool:
             result.note(
                 item.at("value_type"),
                 f"{draft.name}.value_type",
-                f"{item.get('value_type')}: 64-bit values have no mapping type",
+                f"{item.get('value_type')}: no mapping type",
             )
             return False
         fields["type"] = found[0]

@@ -21,16 +21,24 @@ from bridge.importer.source import Node
 
 DEFAULT_SCAN_INTERVAL = 15  # seconds, Home Assistant's
 BASE_KEYS = frozenset({"name", "address", "slave", "device_address", "scan_interval", "unique_id"})
+BASE_KEYS |= {"lazy_error_count"}  # the device's offline threshold (ha_modbus)
+MAX_VERIFY_DELAY = 60  # seconds: the mapping's bound of verify_delay
 _TYPES = {  # data_type -> (mapping type, registers)
     "int16": ("s16", 1),
     "uint16": ("u16", 1),
     "int32": ("s32", 2),
     "uint32": ("u32", 2),
     "float32": ("f32", 2),
+    "float16": ("f16", 1),
+    "int64": ("s64", 4),
+    "uint64": ("u64", 4),
+    "float64": ("f64", 4),
 }
 _STRUCT = {"h": ("s16", 1), "H": ("u16", 1), "i": ("s32", 2), "l": ("s32", 2)}
-_STRUCT |= {"I": ("u32", 2), "L": ("u32", 2), "f": ("f32", 2)}
-_STRUCTURE = re.compile(r"^([<>!]?)([hHiIlLf])$")
+_STRUCT |= {"I": ("u32", 2), "L": ("u32", 2), "f": ("f32", 2), "e": ("f16", 1)}
+_STRUCT |= {"q": ("s64", 4), "Q": ("u64", 4), "d": ("f64", 4)}
+_STRUCTURE = re.compile(r"^([<>!]?)([hHiIlLfeqQd])$")
+_FLOATS = ("f16", "f32", "f64")
 _WRITE_TYPES = {  # write_type -> (table, function code)
     "holding": ("holding", 6),
     "holdings": ("holding", 16),
@@ -166,7 +174,7 @@ def _shape(draft: Draft, result: Import) -> tuple[str, int] | None:
         result.note(
             node.at("data_type"),
             f"{name}.data_type",
-            f"{data_type!r}: the mapping types are 16 and 32-bit integers, float32 and text",
+            f"{data_type!r}: the mapping types are 16, 32 and 64-bit integers, floats and text",
         )
         return None
     draft.fields["type"] = kind
@@ -181,7 +189,7 @@ def _custom(node: Node, result: Import, name: str) -> tuple[str, int, str | None
         result.note(
             node.at("structure"),
             f"{name}.structure",
-            f"{structure!r}: only one 16 or 32-bit integer or float32 ('>h', '>i', '>f'...)",
+            f"{structure!r}: only one integer or float ('>h', '>i', '>q', '>e', '>f', '>d'...)",
         )
         return None
     order, letter = match.groups()
@@ -189,7 +197,7 @@ def _custom(node: Node, result: Import, name: str) -> tuple[str, int, str | None
     if node.get("count", size) != size:
         result.note(node.at("count"), f"{name}.count", f"{structure!r} is {size} register(s)")
         return None
-    reversed_bytes = "word_byte" if size == 2 else "byte"
+    reversed_bytes = "word_byte" if size > 1 else "byte"
     return kind, size, reversed_bytes if order == "<" else None
 
 
@@ -197,7 +205,7 @@ def _swap(draft: Draft, result: Import, size: int, swap: object) -> bool:
     if swap in ("byte", "word_byte"):
         draft.fields["byte_order"] = "little"
     if swap in ("word", "word_byte"):
-        if size != 2 or draft.fields["type"] == "ascii":
+        if size not in (2, 4) or draft.fields["type"] == "ascii":
             result.note(draft.node.at("swap"), f"{draft.name}.swap", "word swap of one number")
             return False
         draft.fields["word_order"] = "little"
@@ -245,10 +253,10 @@ def _nan_value(draft: Draft, result: Import, kind: str) -> bool:
             value = int(value, 16) if value.lower().startswith("0x") else int(value)
         except ValueError:
             value = None
-    if kind in ("f32", "ascii") or isinstance(value, bool) or not isinstance(value, int):
+    if kind in (*_FLOATS, "ascii") or isinstance(value, bool) or not isinstance(value, int):
         result.note(node.at("nan_value"), f"{name}.nan_value", "kept for integer registers only")
         return True
-    bits = 32 if kind in ("s32", "u32") else 16
+    bits = {"s32": 32, "u32": 32, "s64": 64, "u64": 64}.get(kind, 16)
     if not -(1 << (bits - 1)) <= value < (1 << bits):
         result.note(node.at("nan_value"), f"{name}.nan_value", f"does not fit {bits} bits")
         return True
@@ -375,9 +383,23 @@ def _verify(draft: Draft, result: Import, table: str) -> bool:
     address = verify.get("address", draft.fields["address"])
     if isinstance(address, int) and address != draft.fields["address"]:
         draft.fields |= {"write_address": draft.fields["address"], "address": address}
-    if verify.get("delay"):
-        result.note(where, f"{name}.verify.delay", "the bridge reads back at once", partly=True)
+    _verify_delay(draft, result, verify.get("delay"))
     return True
+
+
+def _verify_delay(draft: Draft, result: Import, delay: object) -> None:
+    """``verify``'s ``delay``: the read back that many seconds after a write."""
+    if not delay:
+        return
+    where, key = draft.node.at("verify"), f"{draft.name}.verify.delay"
+    if isinstance(delay, bool) or not isinstance(delay, int | float) or delay < 0:
+        result.note(where, key, f"{delay!r} is not seconds: read back at once", partly=True)
+    elif delay > MAX_VERIFY_DELAY:
+        reason = f"{delay} s: read back after {MAX_VERIFY_DELAY} s, the bridge's longest wait"
+        result.note(where, key, reason, partly=True)
+        draft.fields["verify_delay"] = MAX_VERIFY_DELAY
+    else:
+        draft.fields["verify_delay"] = delay
 
 
 def _words(draft: Draft, result: Import, table: str, commands: tuple[int, int]) -> bool:

@@ -38,6 +38,8 @@ _HUB_KEYS = frozenset(
     | {"method", "baudrate", "bytesize", "parity", "stopbits"}
 )
 _TRANSPORTS = {"tcp": "tcp", "rtuovertcp": "rtu-over-tcp"}
+MAX_CONNECT_DELAY = 60  # seconds: a bus's connect_delay, at most
+MAX_OFFLINE_AFTER = 100  # a device's offline_after, at most
 DEFAULT_HUB = "modbus_hub"
 
 
@@ -167,13 +169,57 @@ def _bus(hub: Node, name: str, result: Import) -> dict[str, Any] | None:
         reason = "the bridge has no UDP transport" if kind == "udp" else f"type {kind!r}"
         result.note(hub.at("type"), f"{name}.type", f"{reason}: the hub is not converted")
         return None
-    if hub.get("delay"):
-        result.note(
-            hub.at("delay"),
-            f"{name}.delay",
-            "the bridge does not wait after connecting",
-        )
+    _connect_delay(hub, name, bus, result)
     return bus
+
+
+def _connect_delay(hub: Node, name: str, bus: dict[str, Any], result: Import) -> None:
+    """The hub's ``delay``: seconds of silence after connecting, the bus's connect_delay."""
+    delay = hub.get("delay")
+    if not delay:
+        return
+    if isinstance(delay, bool) or not isinstance(delay, int | float) or delay < 0:
+        result.note(hub.at("delay"), f"{name}.delay", f"{delay!r} is not seconds")
+    elif delay > MAX_CONNECT_DELAY:
+        reason = f"{delay} s: the bus waits {MAX_CONNECT_DELAY} s, its longest"
+        result.note(hub.at("delay"), f"{name}.delay", reason, partly=True)
+        bus["connect_delay"] = MAX_CONNECT_DELAY
+    else:
+        bus["connect_delay"] = delay
+
+
+def _offline_after(drafts: list[Draft], result: Import) -> int | None:
+    """The device's ``offline_after`` from its entities' ``lazy_error_count`` (failed reads
+    Home Assistant lets pass before an entity is unavailable; it is at the next failure):
+    the largest count + 1, noted once where the device's entities differ (a missing count
+    is Home Assistant's 0)."""
+    counts: dict[str, int] = {}
+    for draft in drafts:
+        count = draft.node.get("lazy_error_count")
+        if "lazy_error_count" not in draft.node:
+            continue
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            where = draft.node.at("lazy_error_count")
+            result.note(where, f"{draft.name}.lazy_error_count", f"{count!r} is not a count")
+        else:
+            counts[draft.name] = min(count, MAX_OFFLINE_AFTER - 1)
+            if count >= MAX_OFFLINE_AFTER:
+                reason = f"{count}: offline after {MAX_OFFLINE_AFTER} failures, the most"
+                where = draft.node.at("lazy_error_count")
+                result.note(where, f"{draft.name}.lazy_error_count", reason, partly=True)
+    if not counts:
+        return None
+    most = max(counts.values())
+    values = {counts.get(d.name, 0) for d in drafts}
+    if len(values) > 1:
+        first = next(d for d in drafts if counts.get(d.name) == most)
+        reason = (
+            f"the device goes offline after {most + 1} failed requests in a row (the largest "
+            f"count + 1): its entities' counts differ ({', '.join(map(str, sorted(values)))})"
+        )
+        where = first.node.at("lazy_error_count")
+        result.note(where, f"{first.name}.lazy_error_count", reason, partly=True)
+    return most + 1
 
 
 def _serial(hub: Node, name: str, result: Import) -> dict[str, Any] | None:
@@ -225,6 +271,9 @@ def _device(
             "addressed: written as unit 1 and disabled; set the device's unit and enable it",
             partly=True,
         )
+    offline_after = _offline_after(drafts, result)
+    if offline_after is not None:
+        config["offline_after"] = offline_after
     wait = hub.get("message_wait_milliseconds")
     if isinstance(wait, int) and not isinstance(wait, bool) and wait > 0:
         config["protocol"] = {"min_request_interval": wait / 1000}

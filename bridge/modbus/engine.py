@@ -49,7 +49,9 @@ def bus_scheduler(bus: SerialBus | TcpBus, *, guard_late_replies: bool = True) -
     )
     gap = link_timing(bus).silence if serial else 0.0
     late_replies = guard_late_replies and bus.transport != "tcp"  # only TCP names requests
-    return BusScheduler(Transport(bus), gap, late_replies=late_replies)
+    return BusScheduler(
+        Transport(bus), gap, late_replies=late_replies, connect_delay=bus.connect_delay
+    )
 
 
 class Engine:

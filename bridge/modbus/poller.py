@@ -21,7 +21,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 
 from bridge.config import DeviceConfig
@@ -41,7 +41,7 @@ from bridge.modbus.keepalive import keep_alive
 from bridge.modbus.refusal_learning import RefusalLearner
 from bridge.modbus.scheduler import BusScheduler, Priority
 from bridge.modbus.tear_check import check_torn
-from bridge.modbus.writer import DeviceWriter, WriteCounters
+from bridge.modbus.writer import DeviceWriter, Later, WriteCounters
 
 log = logging.getLogger(__name__)
 DEFAULT_POLICY = HealthPolicy()
@@ -74,6 +74,8 @@ class DevicePoller:
         guard: Guard = UNGUARDED,
     ) -> None:
         self.device = device
+        if device.offline_after is not None:
+            policy = replace(policy, offline_after=device.offline_after)
         self.state = DeviceState(
             _with_overrides(mapping, device),
             device.options,
@@ -208,10 +210,14 @@ class DevicePoller:
         return (await self.write_many({key: value}, deadline=deadline))[key]
 
     async def write_many(
-        self, items: dict[str, object], *, deadline: float | None = None
+        self,
+        items: dict[str, object],
+        *,
+        deadline: float | None = None,
+        later: Later | None = None,
     ) -> dict[str, Value]:
         """All or nothing: see ``DeviceWriter.write_many``."""
-        return await self.writer.write_many(items, deadline=deadline)
+        return await self.writer.write_many(items, deadline=deadline, later=later)
 
     def _offline_wake(self) -> float:
         return self.health.next_attempt if self.health.online is False else float("inf")

@@ -5,7 +5,8 @@ may be addressed now (``min_interval`` per unit, e.g. the Smartgen's 1 s between
 requests): a command waits at most for the one transaction in flight, and a unit that
 must rest does not hold up the others. Between two frames the bus stays silent for at
 least 3.5 characters at its baud rate. A lost port or gateway is reopened with backoff
-while jobs wait; every job still ends in its own deadline's error, never hangs.
+while jobs wait (after each connect, the bus stays silent ``connect_delay`` seconds); every
+job still ends in its own deadline's error, never hangs.
 
 A write is never cut short: a compound write (``WriteSequence``: a sign and a magnitude,
 a pulse's edges, the keys of one /set) goes out frame after frame with nothing between
@@ -110,10 +111,18 @@ class BusCounters:
 class BusScheduler:
     """Serialises all traffic of one bus."""
 
-    def __init__(self, transport: Transport, gap: float, *, late_replies: bool = False) -> None:
+    def __init__(
+        self,
+        transport: Transport,
+        gap: float,
+        *,
+        late_replies: bool = False,
+        connect_delay: float = 0.0,
+    ) -> None:
         self.transport = transport
         self.gap = gap
         self.late_replies = late_replies  # True: replies carry no transaction id
+        self.connect_delay = connect_delay  # silence after each (re)connect
         self.counters = BusCounters()
         self._queue: list[_Entry] = []  # a heap: the most urgent job first
         self._sequence = itertools.count()
@@ -433,6 +442,8 @@ class BusScheduler:
         self._reopen_delay = 0.0
         self._reopen_at = 0.0
         self.down_reason = None
+        if self.connect_delay:  # nothing else can use a bus that is not connected yet
+            await asyncio.sleep(self.connect_delay)
 
 
 class _Resend(Exception):  # noqa: N818 - a signal inside the scheduler, never raised out

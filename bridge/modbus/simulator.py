@@ -40,6 +40,7 @@ from __future__ import annotations
 import asyncio
 import random
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
@@ -92,6 +93,8 @@ __all__ = ["Quirks", "SimulatedUnit", "Simulator", "two_byte_count_frame"]
 
 _TABLES = {1: Table.COIL, 5: Table.COIL, 15: Table.COIL, 2: Table.DISCRETE, 4: Table.INPUT}
 _BIT_SPACE = 4096  # coils/discrete inputs 0..4095 exist; above, pymodbus answers 02 itself
+REQUESTS_KEPT = 10_000  # the latest requests a simulator lists (``Simulator.requests``)
+Request = tuple[int, int, int]  # unit, function code, address
 _BIT_COUNT: ContextVar[int] = ContextVar("bit_count", default=1)
 
 
@@ -155,6 +158,7 @@ class _Device:
         self.record = record
         self.unlocked = False  # Quirks.password: the right password was written
         self.misreads: list[dict[Cell, int]] = []  # answers the next reads get (counter faults)
+        self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)  # the simulator's, shared
 
     def set_quirks(self, quirks: Quirks) -> None:
         _check_quirks(quirks)
@@ -192,6 +196,7 @@ class _Device:
         if values is None and function_code in (5, 6, 15, 16):
             self._fill(table, start, address, count, registers)  # the echo after FC06
             return None
+        self.requests.append((self.unit, function_code, address))
         delay = self.quirks.latency + (self.quirks.write_latency if values is not None else 0)
         if delay > 0:
             await asyncio.sleep(delay)
@@ -304,13 +309,18 @@ class Simulator:
     """Simulated units on one bus (TCP port or serial line). ``writes`` lists every write
     request a live unit received, in order, as ``(unit, Write)``: refused ones included;
     ``write_times[i]`` is when ``writes[i]`` arrived (``time.monotonic()``, before the
-    unit's latency), for measuring how long a command took to reach the wire."""
+    unit's latency), for measuring how long a command took to reach the wire. ``requests``
+    lists the latest requests live units received, reads and writes, as ``(unit, function
+    code, address)``: the order a bus served its devices in."""
 
     def __init__(self, units: Sequence[SimulatedUnit], *, seed: int = 0, tick: float = 1.0) -> None:
         self.writes: list[tuple[int, Write]] = []
         self.write_times: list[float] = []
         self.ready = asyncio.Event()
         self._devices = {spec.unit: _Device(spec, self._record_write) for spec in units}
+        self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)
+        for device in self._devices.values():
+            device.requests = self.requests
         self._rng = random.Random(seed)  # noqa: S311 - simulated readings, not secrets
         self._tick = tick
         self._port: int | None = None

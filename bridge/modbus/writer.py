@@ -7,12 +7,15 @@ of an EEPROM parameter) -> encode every key (type, range, enum, EEPROM rate limi
 see the words the keys before them leave) -> one frame per word -> write ahead of polls,
 as one ``WriteSequence`` when there is more than one frame (undone if a later frame
 fails, finished before a stopping bus ends) -> publish what the unit acknowledged -> read
-back. Anything refused raises before a byte reaches the wire; one refused key refuses
-the whole command.
+back (a key with a ``verify_delay`` that long later, off the bus: polls and other devices
+go on; with ``later``, after the command, so that the device's next command goes on too).
+Anything refused raises before a byte reaches the wire; one refused key refuses the whole
+command.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 from collections.abc import Iterable
@@ -46,6 +49,7 @@ from bridge.modbus.scheduler import Priority
 
 log = logging.getLogger(__name__)
 Address = tuple[Table, int]
+Later = list[tuple[float, Point]]  # read backs due after a verify_delay: (when, point)
 
 
 @dataclass(slots=True)
@@ -70,7 +74,11 @@ class DeviceWriter:
         self.counters = WriteCounters()
 
     async def write_many(
-        self, items: dict[str, object], *, deadline: float | None = None
+        self,
+        items: dict[str, object],
+        *,
+        deadline: float | None = None,
+        later: Later | None = None,
     ) -> dict[str, Value]:
         """Validate every key, write them all ahead of polls, read back; return the values.
 
@@ -80,11 +88,13 @@ class DeviceWriter:
         fields of one word) that is never left half done: if a frame after the first fails,
         the frames done are undone and PartialWriteError says what the device holds now.
         ``deadline`` (monotonic): the first frame must be sent by then, else the command is
-        dropped with CommandExpiredError. ``self.counters``: each key written (done) or
+        dropped with CommandExpiredError. ``later``: where the read backs of keys with a
+        ``verify_delay`` go, for ``read_back_later`` once the caller let the device's next
+        command go (without it they wait here). ``self.counters``: each key written (done) or
         left unchanged (skipped_unchanged); each command rejected, failed or expired.
         """
         try:
-            return await self._write_many(items, deadline)
+            return await self._write_many(items, deadline, later)
         except ValueRejectedError:
             self.counters.rejected += 1
             raise
@@ -96,7 +106,7 @@ class DeviceWriter:
             raise
 
     async def _write_many(
-        self, items: dict[str, object], deadline: float | None
+        self, items: dict[str, object], deadline: float | None, later: Later | None
     ) -> dict[str, Value]:
         points = self._allowed(items)
         _check_conditions_alone(points)
@@ -142,11 +152,50 @@ class DeviceWriter:
                 self.counters.last_write[_written(point)] = time.monotonic()
             if point.entity.readable and point.entity.press is None:
                 self._publish_acknowledged(point, plan[point.key])
-        fresh: set[Address] = set()  # one read back serves every key of a register
-        for point in written:
-            held[point.key] = await self._written_value(point, items[point.key], fresh)
-        await self._read_back_sharers(written, plan, fresh)
+        await self._read_backs(written, items, held, later, plan)
         return {p.key: held[p.key] for p in points}
+
+    async def _read_backs(
+        self,
+        written: list[Point],
+        items: dict[str, object],
+        held: dict[str, Value],
+        later: Later | None,
+        plan: dict[str, tuple[Write, ...]],
+    ) -> None:
+        """Each written key's value read back into ``held``; a key with a ``verify_delay``
+        goes to ``later`` (held as acknowledged meanwhile), or, without ``later``, all are
+        read after the longest delay (the bus is not held while waiting). One read back
+        serves every key of a register, and the other entities on the registers written
+        are read back with them (``_read_back_sharers``)."""
+        delayed = {p.key for p in written if p.entity.verify_delay}
+        if later is not None:
+            now = time.monotonic()
+            later.extend(
+                (now + (p.entity.verify_delay or 0.0), p) for p in written if p.key in delayed
+            )
+        elif delayed:
+            await asyncio.sleep(max(p.entity.verify_delay or 0.0 for p in written))
+            delayed = set()  # waited: every key is read back now
+        fresh: set[Address] = set()
+        for point in written:
+            if point.key in delayed:
+                held[point.key] = self._held(point)
+            else:
+                held[point.key] = await self._written_value(point, items[point.key], fresh)
+        now_read = [p for p in written if p.key not in delayed]
+        await self._read_back_sharers(now_read, plan, fresh)
+
+    async def read_back_later(self, later: Later) -> None:
+        """The read backs a command left for after its ``verify_delay`` (``write_many``'s
+        ``later``), each when due; a failure raises (ModbusError) and counts as failed."""
+        for due, point in sorted(later, key=lambda entry: entry[0]):
+            await asyncio.sleep(max(0.0, due - time.monotonic()))
+            try:
+                await self._read_back(point, set())
+            except ModbusError:
+                self.counters.failed += 1
+                raise
 
     def inherit(self, earlier: DeviceWriter) -> None:
         """Share the spacing of the writer this one replaces (a mapping reload): a toggle or

@@ -69,6 +69,14 @@ def test_each_entity_is_converted_or_reported_by_name(
     assert sorted(converted) == sorted(expect.get("converted", []))
     assert set(expect.get("reported", [])) <= whole, result.notes
     assert set(expect.get("partly", [])) <= partly, result.notes
+    assert not {n.key for n in result.notes} & set(expect.get("quiet", [])), result.notes
+    entities = {k: e for device in result.devices for k, e in device.mapping["entities"].items()}
+    for key, fields in expect.get("fields", {}).items():
+        assert {f: entities[key].get(f) for f in fields} == fields
+    for field, value in expect.get("bus", {}).items():
+        assert result.buses[0][field] == value
+    for field, value in expect.get("device", {}).items():
+        assert result.devices[0].config[field] == value
 
 
 def _states() -> list[dict[str, Any]]:

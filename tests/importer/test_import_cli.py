@@ -16,7 +16,7 @@ modbus:
     type: tcp
     host: 127.0.0.1
     port: 5020
-    delay: 1
+    delay: 90
     sensors:
       - {name: Water temperature, address: 3, slave: 2, scale: 0.1, precision: 1,
          unit_of_measurement: "°C", device_class: temperature, state_class: measurement}
@@ -40,8 +40,8 @@ def test_the_files_pass_check_and_name_their_source(
     printed = capsys.readouterr()
     assert printed.err == (
         "configuration.yaml: 1 key(s) not converted or converted in part\n"
-        "  configuration.yaml:6: Boiler.delay: not converted: the bridge does not wait "
-        "after connecting\n"
+        "  configuration.yaml:6: Boiler.delay: partly converted: 90 s: the bus waits 60 s, "
+        "its longest\n"
     )
     assert printed.out.startswith(f"{out / 'config.yaml'}: 1 device(s), 2 entities; 1 note(s)")
     header = f"# Imported by `modbus-mqtt-bridge import` from Home Assistant modbus {source}\n"
@@ -50,6 +50,7 @@ def test_the_files_pass_check_and_name_their_source(
     assert (out / "import-report.txt").read_text(encoding="utf-8") == printed.err
     assert main(["check", "-c", str(out / "config.yaml")]) == 0
     loaded = load_config(out / "config.yaml")
+    assert loaded.config.buses[0].connect_delay == 60  # Home Assistant's hub delay
     pump = loaded.mappings["boiler"].entities["pump"]
     assert (pump.table.value, pump.access.value, pump.ha.entity_id) == ("coil", "rw", "pump")
 
