@@ -16,8 +16,8 @@ from bridge.core.mapping import (
     Point,
     builtin_mapping_names,
     builtin_mapping_path,
+    library_problems,
     load_mapping,
-    mapping_warnings,
 )
 from bridge.errors import MissingDataError, ValueRejectedError
 
@@ -77,7 +77,7 @@ def test_presentation_conventions(name: str) -> None:
 def test_the_naming_conventions_are_errors_for_the_shipped_mappings(name: str) -> None:
     """A user's mapping loads with convention warnings (a bridge upgrade does not stop a
     working site over a name); a shipped one has none: here they are errors."""
-    assert mapping_warnings(MAPPINGS[name]) == []
+    assert library_problems(MAPPINGS[name]) == []
 
 
 @pytest.mark.parametrize("name", sorted(MAPPINGS))
