@@ -311,3 +311,47 @@ def test_clamp_zero_suppress_and_a_switchs_words_are_converted(tmp_path: Path) -
         (16, "Coil.command_on"),
         (17, "Big.command_on"),
     ]
+
+
+PRESENTED = """\
+modbus:
+  - name: hub
+    type: tcp
+    host: 127.0.0.1
+    port: 502
+    sensors:
+      - {name: Yield, address: 1, slave: 1, data_type: uint32, device_class: energy,
+         unit_of_measurement: Wh}
+      - {name: Reactive, address: 3, slave: 1, device_class: reactive_power,
+         unit_of_measurement: VAr, state_class: measurement}
+      - {name: Signal, address: 4, slave: 1, device_class: signal_strength,
+         unit_of_measurement: dBm, scale: -1}
+      - {name: Label, address: 5, slave: 1, data_type: custom, structure: ">6s", count: 3}
+      - {name: Schedule, address: 8, slave: 1, data_type: custom, structure: ">HHh", count: 3}
+"""
+
+
+def test_a_class_the_bridge_refuses_is_dropped_and_the_entity_kept(tmp_path: Path) -> None:
+    """Home Assistant shows an energy reading without a state class, or a 'VAr' reactive
+    power, all the same (it only warns): the entity comes over without the device class,
+    and the report says so; text in a custom structure is a text; a structure of several
+    values (a comma-joined text in Home Assistant) is reported."""
+    result = convert(tmp_path, PRESENTED)
+    entities = only_mapping(result).model_dump()["entities"]
+    assert sorted(entities) == ["label", "reactive", "signal", "yield"]
+    assert entities["yield"]["ha"]["device_class"] is None
+    assert (entities["reactive"]["ha"]["device_class"], entities["reactive"]["unit"]) == (
+        None,
+        "VAr",
+    )
+    assert entities["signal"]["ha"]["device_class"] == "signal_strength"
+    assert (entities["label"]["type"], entities["label"]["count"]) == ("ascii", 3)
+    label = only_mapping(result).points()["label"]
+    words = (0x4142, 0x3132, 0x6364)  # Home Assistant: struct ">6s" decoded, "AB12cd"
+    assert decode(label, {(Table.HOLDING, 5 + i): w for i, w in enumerate(words)}) == "AB12cd"
+    assert [(n.where.line, n.key) for n in result.notes] == [
+        (14, "Schedule.structure"),
+        (7, "Yield.device_class"),
+        (9, "Reactive.device_class"),  # its state class stays
+    ]
+    assert entities["reactive"]["ha"]["state_class"] == "measurement"
