@@ -19,8 +19,7 @@ OPTIONS = {"m": {"choices": ["a", "b"], "default": "a", "description": "model"}}
 
 
 def rows_of(entities: dict[str, dict[str, Any]], **top: Any) -> list[str]:
-    """The warnings of a mapping that loads all the same (a user's mapping valid before
-    the conventions came keeps working)."""
+    """The library's convention rows of a mapping that loads all the same."""
     return library_problems(make_mapping(entities, **top))
 
 
