@@ -97,5 +97,6 @@ def whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict
         named = named or [k for k in entities if any(f"'{k}'" in r for r in rows)]
         for key in named or list(entities):
             name = entities.pop(key)["name"]
-            result.note(where.get(name, Where(result.source, 1)), name, "; ".join(rows))
+            own = [r for r in rows if r.startswith(f"entities.{key}.") or f"'{key}'" in r]
+            result.note(where.get(name, Where(result.source, 1)), name, "; ".join(own or rows))
     return entities

@@ -355,3 +355,24 @@ def test_a_class_the_bridge_refuses_is_dropped_and_the_entity_kept(tmp_path: Pat
         (9, "Reactive.device_class"),  # its state class stays
     ]
     assert entities["reactive"]["ha"]["state_class"] == "measurement"
+
+
+def test_an_entity_left_out_by_the_checks_across_entities_is_told_its_own_reason(
+    tmp_path: Path,
+) -> None:
+    """Two entities dropped from one device each get the row about them, not every row of
+    the device (a package with three such switches read each note three times over)."""
+    sensors = [
+        {"name": "Grid code", "address": 1, "slave": 1, "data_type": "uint32"},
+        {"name": "Grid signed", "address": 1, "slave": 1, "data_type": "int32"},
+        {"name": "Mode code", "address": 7, "slave": 1, "data_type": "uint32"},
+        {"name": "Mode signed", "address": 7, "slave": 1, "data_type": "int32"},
+    ]
+    hub = {"name": "hub", "type": "tcp", "host": "127.0.0.1", "port": 502, "sensors": sensors}
+    result = convert(tmp_path, yaml.safe_dump({"modbus": [hub]}))
+    kept = set(result.devices[0].mapping["entities"]) if result.devices else set()
+    reasons = {n.key: n.reason for n in result.notes if n.key in ("Grid signed", "Mode signed")}
+    if not reasons:  # one register, many entities: both pairs convert
+        assert kept == {"grid_code", "grid_signed", "mode_code", "mode_signed"}
+        return
+    assert all(("'grid_code'" in r) != ("'mode_code'" in r) for r in reasons.values())
