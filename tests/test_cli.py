@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ import pytest
 from bridge.app import Bridge
 from bridge.cli import console as cli
 from bridge.cli import main
+from bridge.core import mapping as mapping_module
 from bridge.core.mapping import builtin_mapping_names
 from bridge.mqtt import MqttPublishError
 
@@ -164,17 +166,26 @@ def test_run_says_a_bridge_error_that_ended_it_in_one_line(
     assert capsys.readouterr().err == "error: cannot publish to x: too long\n"
 
 
-OLD_STYLE = """manufacturer: Unknown (OEM)
+USERS_OWN = """manufacturer: Unknown (OEM)
 model: X1
-description: a user's mapping written before the naming conventions
+description: a user's battery inverter, named as its owner reads it
 source: {title: manual}
 entities:
-  speed: {name: Motor SPEED, address: 1}
-  baud: {name: Baud rate, address: 2, ha: {entity_category: diagnostic, enabled: true}}
+  bms_voltage: {name: BMS voltage, address: 1}
+  dsp_temperature: {name: DSP temperature, address: 2}
+  ems_mode: {name: EMS mode, address: 3}
+  speed: {name: Motor SPEED, address: 4}
+  baud: {name: Baud rate, address: 5, ha: {entity_category: diagnostic, enabled: true}}
 """
-OLD_STYLE_WARNINGS = [
+LIBRARY_ROWS = [
     "manufacturer: 'Unknown (OEM)' does not read as a company's name (write 'Generic' when "
     "the manual names none, and what you know in a comment)",
+    "entities.bms_voltage.name: 'BMS' is written in capitals: write it as a word, or add the "
+    "abbreviation to bridge/core/convention.py ('BMS voltage')",
+    "entities.dsp_temperature.name: 'DSP' is written in capitals: write it as a word, or add "
+    "the abbreviation to bridge/core/convention.py ('DSP temperature')",
+    "entities.ems_mode.name: 'EMS' is written in capitals: write it as a word, or add the "
+    "abbreviation to bridge/core/convention.py ('EMS mode')",
     "entities.speed.name: 'SPEED' is written in capitals: write it as a word, or add the "
     "abbreviation to bridge/core/convention.py ('Motor SPEED')",
     "entities.baud.ha.enabled: a diagnostic entity is disabled by default: say why it is "
@@ -182,8 +193,8 @@ OLD_STYLE_WARNINGS = [
 ]
 
 
-def old_style_site(tmp_path: Path) -> Path:
-    (tmp_path / "mine.yaml").write_text(OLD_STYLE)
+def users_site(tmp_path: Path) -> Path:
+    (tmp_path / "mine.yaml").write_text(USERS_OWN)
     config = tmp_path / "site.yaml"
     config.write_text(
         "mqtt: {url: 'mqtt://127.0.0.1:1'}\n"
@@ -195,29 +206,21 @@ def old_style_site(tmp_path: Path) -> Path:
     return config
 
 
-def test_a_users_mapping_that_breaks_a_naming_convention_still_loads(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """The conventions are warnings for a user's mapping: validate and check say them once
-    (per file, not per device using it) and exit 0."""
-    config = old_style_site(tmp_path)
+def test_a_users_names_are_the_users(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The library's naming rules are not a user's: "BMS voltage", a name in capitals, a
+    placeholder manufacturer and an enabled diagnostic entity validate and check with no
+    warning, and nothing sends the user to edit the package."""
+    config = users_site(tmp_path)
     assert main(["mappings", "validate", str(tmp_path / "mine.yaml")]) == 0
-    out, err = capsys.readouterr()
-    assert out == f"{tmp_path / 'mine.yaml'}: ok (2 entities, 3 warning(s))\n"
-    assert err.splitlines() == [
-        f"warning: {tmp_path / 'mine.yaml'}: 3 warning(s)",
-        *(f"  {row}" for row in OLD_STYLE_WARNINGS),
-    ]
+    assert capsys.readouterr() == (f"{tmp_path / 'mine.yaml'}: ok (5 entities)\n", "")
     assert main(["check", "-c", str(config)]) == 0
-    out, err = capsys.readouterr()
-    assert out == f"{config}: ok (1 bus(es), 2 device(s), 4 entities, 3 warning(s))\n"
-    assert err.splitlines() == [
-        f"warning: {config}: 3 warning(s)",
-        *(f"  devices.a.mapping: mine.yaml: {row}" for row in OLD_STYLE_WARNINGS),
-    ]
+    assert capsys.readouterr() == (
+        f"{config}: ok (1 bus(es), 2 device(s), 10 entities)\n",
+        "",
+    )
 
 
-def test_run_logs_a_users_convention_warnings_once_at_start(
+def test_run_logs_no_advice_on_a_users_names(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     started: list[Bridge] = []
@@ -225,13 +228,29 @@ def test_run_logs_a_users_convention_warnings_once_at_start(
     async def starts(bridge: Bridge) -> None:
         started.append(bridge)
 
-    config = old_style_site(tmp_path)
+    config = users_site(tmp_path)
     monkeypatch.setattr(Bridge, "run", starts)
     monkeypatch.setattr(cli, "configure_logging", lambda *_: None)  # pytest keeps its handlers
-    with caplog.at_level("WARNING"):
+    with caplog.at_level("DEBUG"):
         assert main(["run", "-c", str(config)]) == 0
     assert len(started) == 1
-    assert [(r.name, r.levelname, r.getMessage()) for r in caplog.records] == [
-        ("bridge.config", "WARNING", f"{config}: devices.a.mapping: mine.yaml: {row}")
-        for row in OLD_STYLE_WARNINGS
+    assert [r for r in caplog.records if r.levelno >= logging.WARNING] == []
+    assert not [r for r in caplog.records if "bridge/" in r.getMessage() or ".py" in r.getMessage()]
+
+
+def test_the_library_rules_are_warned_of_for_a_file_of_the_library(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A file in the shipped mappings folder (a contributor's new mapping) is validated
+    against the library's conventions; the same file elsewhere is not."""
+    library = tmp_path / "mappings"
+    library.mkdir()
+    (library / "new_device.yaml").write_text(USERS_OWN)
+    monkeypatch.setattr(mapping_module, "mappings_folder", library.resolve)
+    assert main(["mappings", "validate", str(library / "new_device.yaml")]) == 0
+    out, err = capsys.readouterr()
+    assert out == f"{library / 'new_device.yaml'}: ok (5 entities, 6 warning(s))\n"
+    assert err.splitlines() == [
+        f"warning: {library / 'new_device.yaml'}: 6 warning(s)",
+        *(f"  {row}" for row in LIBRARY_ROWS),
     ]

@@ -10,7 +10,6 @@ import argparse
 import asyncio
 import importlib
 import json
-import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -26,6 +25,7 @@ from bridge.core.mapping import (
     Mapping,
     builtin_mapping_names,
     check_mapping_file,
+    in_library,
     load_mapping,
     mapping_schema,
     resolve_mapping_path,
@@ -137,8 +137,6 @@ def _run(args: argparse.Namespace, _: TextIO) -> int:
 
     loaded = load_config(args.config)
     configure_logging(args.log_level, args.log_format)
-    for row in loaded.warnings:  # once, at start; the mapping loads all the same
-        logging.getLogger("bridge.config").warning("%s: %s", args.config, row)
     try:
         asyncio.run(until_stopped(Bridge(loaded).run()))
     except ExceptionGroup as failed:  # the bridge's task groups wrap what ended it
@@ -156,11 +154,9 @@ def _check(args: argparse.Namespace, out: TextIO) -> int:
     entities = sum(
         len(loaded.mappings[d.id].active(d.options)) for d in config.devices if d.enabled
     )
-    _print_warnings(str(args.config), loaded.warnings)
-    warned = f", {len(loaded.warnings)} warning(s)" if loaded.warnings else ""
     print(
         f"{args.config}: ok ({len(config.buses)} bus(es), {len(config.devices)} device(s), "
-        f"{entities} entities{warned})",
+        f"{entities} entities)",
         file=out,
     )
     return EXIT_OK
@@ -234,11 +230,11 @@ def _parse_options(pairs: list[str], mapping: Mapping) -> dict[str, str]:
 
 
 def _validate(args: argparse.Namespace, out: TextIO) -> int:
-    """Every error and warning of each file; exit 2 when a file has errors (warnings, the
-    naming and enabled-default conventions, do not refuse a mapping)."""
+    """Every error of each file, and for a file of the shipped library the warnings of its
+    conventions (names, enabled defaults); exit 2 when a file has errors."""
     failed = 0
     for path in args.files:
-        report = check_mapping_file(path)
+        report = check_mapping_file(path, library=in_library(path))
         if report.mapping is None:
             print(f"error: {MappingError(report.source, list(report.errors))}", file=sys.stderr)
             failed += 1

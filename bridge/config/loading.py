@@ -35,7 +35,7 @@ from bridge.config.model import (
 )
 from bridge.config.mqtt import MqttConfig
 from bridge.core.counters import counters_of
-from bridge.core.mapping import Mapping, format_validation_errors, load_mapping, mapping_warnings
+from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
 from bridge.core.mapping import resolve_mapping_path as _resolve
 from bridge.core.yaml_source import parse_yaml
 from bridge.errors import ConfigError, MappingError
@@ -48,7 +48,6 @@ class LoadedConfig:
     path: Path
     config: Config
     mappings: dict[str, Mapping]
-    warnings: tuple[str, ...] = ()  # the conventions a user's mapping breaks: not refused
 
 
 def load_config(path: Path) -> LoadedConfig:
@@ -85,24 +84,7 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
     errors += folder_errors(config.bridge, path.parent)
     if errors:
         raise ConfigError(str(path), errors)
-    warnings = _mapping_warnings(config.devices, mappings)
-    return LoadedConfig(path=path, config=config, mappings=mappings, warnings=warnings)
-
-
-def _mapping_warnings(
-    devices: Iterable[DeviceConfig], mappings: dict[str, Mapping]
-) -> tuple[str, ...]:
-    """Each mapping's convention warnings once, under the first device that uses it."""
-    rows: list[str] = []
-    seen: set[int] = set()
-    for device in devices:
-        mapping = mappings.get(device.id)
-        if mapping is None or id(mapping) in seen:
-            continue
-        seen.add(id(mapping))
-        where = f"devices.{device.id}.mapping: {device.mapping}"
-        rows += [f"{where}: {row}" for row in mapping_warnings(mapping)]
-    return tuple(rows)
+    return LoadedConfig(path=path, config=config, mappings=mappings)
 
 
 def _errors_of_valid_parts(data: dict[str, Any], path: Path) -> list[str]:

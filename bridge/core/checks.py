@@ -1,6 +1,6 @@
 """Whole-mapping checks: keys, addresses, references, options, function codes, overlaps;
-apart, the presentation conventions (``convention``: names, manufacturer, enabled
-defaults), which are warnings for a user's mapping.
+apart, the shipped library's presentation conventions (``convention``: names,
+manufacturer, enabled defaults), which a user's mapping is not held to.
 
 Each check returns rows ``entities.<key>.<field>: message``; ``check_mapping`` runs them all
 so a user sees every problem of a file at once. The checks read the parts of a mapping
@@ -66,9 +66,9 @@ def check_mapping(mapping: MappingParts) -> list[str]:
 
 
 def check_conventions(mapping: MappingParts) -> list[str]:
-    """The presentation conventions (``convention``) ``mapping`` breaks: errors for the
-    shipped mappings (their tests), warnings for a user's own, which load all the same
-    (a bridge upgrade does not stop a working site over a name). Names are compared per
+    """The shipped library's presentation conventions (``convention``) ``mapping``
+    breaks: errors in the library's tests, warnings from ``mappings validate`` for a file
+    of the library; never run on a user's or an imported mapping. Names are compared per
     option combination, so none are checked while options or variants are invalid."""
     if any(_options(mapping)):
         return []

@@ -1,10 +1,12 @@
 """How a mapping presents its device to people: names, identity and enabled defaults. Pure.
 
-The rules of docs/mappings.md ("Names" and "Which entities are enabled"), as
-``location: message`` rows (``checks.check_conventions``): warnings for a user's mapping,
-which loads all the same, and errors for the shipped ones (tests/mappings). None protects
-a device (entity ids come from keys, writes are guarded by ``dangerous`` and the config):
-a bridge upgrade must not stop a working site over a name.
+The rules of docs/mappings.md ("Names" and "Which entities are enabled") for the shipped
+library (the package's ``mappings/``), as ``location: message`` rows
+(``checks.check_conventions``): errors in its tests (tests/mappings), warnings from
+``mappings validate`` for a file in that folder. A user's or an imported mapping is never
+checked against them: its names are the user's (a battery's "BMS voltage" stays so), and
+no advice may send a user to edit the installed package. None protects a device (entity
+ids come from keys, writes are guarded by ``dangerous`` and the config).
 
 - a name reads as words: no internal key in it (a word with ``_``), no shouting (a word
   of three or more capitals that is not a known abbreviation, ``ABBREVIATIONS``), and no
@@ -25,8 +27,9 @@ from collections.abc import Mapping as AnyMapping
 from bridge.core.entity import Entity
 from bridge.core.variant import active_entities
 
-# Words a name may write in capitals: abbreviations people read as such. Add one here on
-# purpose; a manual's habit of printing parameter names in capitals is not a reason.
+# Words a shipped mapping's name may write in capitals: abbreviations people read as such.
+# Add one here on purpose; a manual's habit of printing parameter names in capitals is not
+# a reason.
 ABBREVIATIONS = frozenset(
     {
         "ASCII",

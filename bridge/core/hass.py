@@ -32,6 +32,7 @@ SENSOR_UNITS: dict[str, frozenset[str | None]] = {
     "pressure": frozenset(_PRESSURE),
     "reactive_energy": frozenset({"varh", "kvarh"}),
     "reactive_power": frozenset({"mvar", "var", "kvar"}),
+    "signal_strength": frozenset({"dB", "dBm"}),
     "temperature": frozenset({"°C", "°F", "K"}),
     "voltage": frozenset({"µV", "mV", "V", "kV", "MV"}),
     "volume": frozenset(_VOLUME),

@@ -187,9 +187,10 @@ def printed_address(points: Iterable[Point], table: Table, wire: int, protocol: 
 
 @dataclass(frozen=True, slots=True)
 class MappingReport:
-    """Every problem of one mapping file: ``errors`` refuse it; ``warnings`` (the
-    presentation conventions: names, manufacturer, enabled defaults) do not. ``mapping``
-    is the mapping loaded, None when there are errors."""
+    """Every problem of one mapping file: ``errors`` refuse it; ``warnings`` (the shipped
+    library's conventions: names, manufacturer, enabled defaults; only for a file checked
+    as one of the library's) do not. ``mapping`` is the mapping loaded, None when there
+    are errors."""
 
     source: str
     mapping: Mapping | None
@@ -197,10 +198,11 @@ class MappingReport:
     warnings: tuple[str, ...]
 
 
-def check_mapping_text(text: str, source: str) -> MappingReport:
+def check_mapping_text(text: str, source: str, *, library: bool = False) -> MappingReport:
     """Every layer of checks in one run: the YAML, the fields, the checks across
-    entities and the protocol (on the parts that validate when some do not), the
-    conventions. Only a file that is not YAML, or not a mapping at the top, stops early."""
+    entities and the protocol (on the parts that validate when some do not), and with
+    ``library`` (a file of the shipped library) its conventions. Only a file that is not
+    YAML, or not a mapping at the top, stops early."""
     try:
         data = parse_yaml(text, source)
     except ValueError as exc:
@@ -213,29 +215,32 @@ def check_mapping_text(text: str, source: str) -> MappingReport:
     except ValidationError as exc:
         rows = list(format_validation_errors(exc))
     else:
-        return MappingReport(source, mapping, (), tuple(mapping_warnings(mapping)))
+        warned = library_problems(mapping) if library else []
+        return MappingReport(source, mapping, (), tuple(warned))
     more, warnings = _rows_of_valid_parts(data)
-    return MappingReport(source, None, tuple(dict.fromkeys(rows + more)), tuple(warnings))
+    warned = warnings if library else []
+    return MappingReport(source, None, tuple(dict.fromkeys(rows + more)), tuple(warned))
 
 
 def parse_mapping(text: str, source: str) -> Mapping:
-    """Validate mapping YAML text; raise MappingError with ``entity.field: message`` rows.
-    Convention warnings do not refuse it (``mapping_warnings``)."""
+    """Validate mapping YAML text; raise MappingError with ``entity.field: message`` rows
+    (the library's conventions are not checked: ``library_problems``)."""
     report = check_mapping_text(text, source)
     if report.mapping is None:
         raise MappingError(source, list(report.errors))
     return report.mapping
 
 
-def mapping_warnings(mapping: Mapping) -> list[str]:
-    """The conventions ``mapping`` breaks (``checks.check_conventions``), as rows."""
-    return list(mapping.memo("warnings", lambda: tuple(checks.check_conventions(mapping))))
+def library_problems(mapping: Mapping) -> list[str]:
+    """The shipped library's conventions ``mapping`` breaks (``checks.check_conventions``),
+    as rows: for the library's files only, never a user's or an imported mapping."""
+    return checks.check_conventions(mapping)
 
 
 def _rows_of_valid_parts(data: dict[str, Any]) -> tuple[list[str], list[str]]:
-    """Errors across entities and convention warnings of the parts of an invalid mapping
-    that validate (an invalid entity left out, an invalid protocol field at its default),
-    so that a file's problems are reported in one run. A reference to an invalid entity is
+    """Errors across entities and the library's convention rows of the parts of an invalid
+    mapping that validate (an invalid entity left out, an invalid protocol field at its
+    default), so that a file's problems are reported in one run. A reference to an invalid entity is
     not reported twice; the checks across entities wait for a valid addressing rule and
     valid options (addresses and option values would be guessed)."""
     raw = data.get("entities")
@@ -307,7 +312,7 @@ def load_mapping(path: Path) -> Mapping:
     return report.mapping
 
 
-def check_mapping_file(path: Path) -> MappingReport:
+def check_mapping_file(path: Path, *, library: bool = False) -> MappingReport:
     """Read one mapping file and report all its problems (``check_mapping_text``)."""
     try:
         text = path.read_text(encoding="utf-8")
@@ -315,7 +320,7 @@ def check_mapping_file(path: Path) -> MappingReport:
         return MappingReport(
             str(path), None, (f"cannot read {path.absolute()}: {exc.strerror}",), ()
         )
-    return check_mapping_text(text, str(path))
+    return check_mapping_text(text, str(path), library=library)
 
 
 def mappings_folder() -> Path:
@@ -323,6 +328,15 @@ def mappings_folder() -> Path:
     package = Path(__file__).resolve().parent.parent
     installed = package / "mappings"
     return installed if installed.is_dir() else package.parent / "mappings"
+
+
+def in_library(path: Path) -> bool:
+    """True for a file of the shipped library (a ``.yaml`` directly in ``mappings_folder``),
+    the only files the library's conventions are checked on."""
+    try:
+        return path.resolve().parent == mappings_folder() and path.suffix == ".yaml"
+    except (OSError, RuntimeError):  # a symlink loop: not the library's
+        return False
 
 
 def builtin_mapping_names() -> list[str]:

@@ -15,6 +15,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from bridge.core.entity import Entity
+from bridge.core.hass import presentation_problems
 from bridge.core.mapping import Mapping, format_validation_errors
 from bridge.importer.result import Import
 from bridge.importer.source import Node, Where
@@ -35,7 +36,9 @@ class Draft:
 
 def validated(draft: Draft, fields: dict[str, Any], result: Import) -> dict[str, Any] | None:
     """``fields`` as the mapping takes them: a Home Assistant state or device class the
-    mapping refuses is dropped (noted); None (noted) when they still do not validate. A
+    mapping refuses (a unit the class does not take, a class unknown to the bridge, an
+    energy reading without a summing state class) is dropped (noted), as Home Assistant
+    shows the value all the same; None (noted) when they still do not validate. A
     writable entity whose name speaks of a reset, a password or the line's settings is
     marked ``dangerous`` (written only where the config allows it), and noted."""
     error = ""
@@ -43,12 +46,15 @@ def validated(draft: Draft, fields: dict[str, Any], result: Import) -> dict[str,
         fields = fields | {"dangerous": True}
         reason = "marked dangerous: the device's allow_dangerous_writes permits its writes"
         result.note(draft.node.where, draft.name, reason, partly=True)
-    for drop in ((), ("state_class",), ("state_class", "device_class")):
+    for drop in ((), ("state_class",), ("device_class",), ("state_class", "device_class")):
         trial = fields | {"ha": {k: v for k, v in fields["ha"].items() if k not in drop}}
         try:
-            Entity.model_validate(trial)
+            problems = presentation_problems(Entity.model_validate(trial))
         except ValidationError as exc:
             error = "; ".join(format_validation_errors(exc))
+            continue
+        if problems:
+            error = "; ".join(f"ha: {problem}" for problem in problems)
             continue
         for key in drop:
             if key in fields["ha"]:
@@ -91,5 +97,6 @@ def whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict
         named = named or [k for k in entities if any(f"'{k}'" in r for r in rows)]
         for key in named or list(entities):
             name = entities.pop(key)["name"]
-            result.note(where.get(name, Where(result.source, 1)), name, "; ".join(rows))
+            own = [r for r in rows if r.startswith(f"entities.{key}.") or f"'{key}'" in r]
+            result.note(where.get(name, Where(result.source, 1)), name, "; ".join(own or rows))
     return entities

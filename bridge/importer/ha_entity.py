@@ -39,6 +39,7 @@ _STRUCT |= {"I": ("u32", 2), "L": ("u32", 2), "f": ("f32", 2), "e": ("f16", 1)}
 _STRUCT |= {"q": ("s64", 4), "Q": ("u64", 4), "d": ("f64", 4)}
 _STRUCTURE = re.compile(r"^([<>!]?)([hHiIlLfeqQd])$")
 _FLOATS = ("f16", "f32", "f64")
+_TEXT = re.compile(r"^[<>!=@]?(\d+)s$")  # one text of n bytes: byte order means nothing
 _WRITE_TYPES = {  # write_type -> (table, function code)
     "holding": ("holding", 6),
     "holdings": ("holding", 16),
@@ -168,6 +169,8 @@ def _shape(draft: Draft, result: Import) -> tuple[str, int] | None:
             return None
         kind, size, reverse = found
         swap = reverse or swap
+        if kind == "ascii":
+            draft.fields["count"] = size
     elif data_type in _TYPES:
         kind, size = _TYPES[data_type]
     else:
@@ -182,8 +185,16 @@ def _shape(draft: Draft, result: Import) -> tuple[str, int] | None:
 
 
 def _custom(node: Node, result: Import, name: str) -> tuple[str, int, str | None] | None:
-    """A ``custom`` structure of one value; with ``<``, its swap (every byte reversed)."""
+    """A ``custom`` structure of one value; with ``<``, its swap (every byte reversed). One
+    ``<n>s`` (n bytes, even) is text, as Home Assistant decodes it."""
     structure = node.get("structure")
+    text = _TEXT.match(structure) if isinstance(structure, str) else None
+    if text is not None and int(text.group(1)) % 2 == 0 and 2 <= int(text.group(1)) <= 250:
+        size = int(text.group(1)) // 2
+        if node.get("count", size) != size:
+            result.note(node.at("count"), f"{name}.count", f"{structure!r} is {size} register(s)")
+            return None
+        return "ascii", size, None
     match = _STRUCTURE.match(structure) if isinstance(structure, str) else None
     if match is None:
         result.note(

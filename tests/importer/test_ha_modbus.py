@@ -353,3 +353,67 @@ def test_a_packages_switches_on_its_sensors_registers_are_all_converted() -> Non
     shared = {points["inverter_work_mode_raw"].address, points["inverter_export_limit_raw"].address}
     reads = plan_reads(list(points.values()), limits_for(mapping)).reads
     assert all(sum(a in r.span for r in reads) == 1 for a in shared)  # one read serves both
+
+
+PRESENTED = """\
+modbus:
+  - name: hub
+    type: tcp
+    host: 127.0.0.1
+    port: 502
+    sensors:
+      - {name: Yield, address: 1, slave: 1, data_type: uint32, device_class: energy,
+         unit_of_measurement: Wh}
+      - {name: Reactive, address: 3, slave: 1, device_class: reactive_power,
+         unit_of_measurement: VAr, state_class: measurement}
+      - {name: Signal, address: 4, slave: 1, device_class: signal_strength,
+         unit_of_measurement: dBm, scale: -1}
+      - {name: Label, address: 5, slave: 1, data_type: custom, structure: ">6s", count: 3}
+      - {name: Schedule, address: 8, slave: 1, data_type: custom, structure: ">HHh", count: 3}
+"""
+
+
+def test_a_class_the_bridge_refuses_is_dropped_and_the_entity_kept(tmp_path: Path) -> None:
+    """Home Assistant shows an energy reading without a state class, or a 'VAr' reactive
+    power, all the same (it only warns): the entity comes over without the device class,
+    and the report says so; text in a custom structure is a text; a structure of several
+    values (a comma-joined text in Home Assistant) is reported."""
+    result = convert(tmp_path, PRESENTED)
+    entities = only_mapping(result).model_dump()["entities"]
+    assert sorted(entities) == ["label", "reactive", "signal", "yield"]
+    assert entities["yield"]["ha"]["device_class"] is None
+    assert (entities["reactive"]["ha"]["device_class"], entities["reactive"]["unit"]) == (
+        None,
+        "VAr",
+    )
+    assert entities["signal"]["ha"]["device_class"] == "signal_strength"
+    assert (entities["label"]["type"], entities["label"]["count"]) == ("ascii", 3)
+    label = only_mapping(result).points()["label"]
+    words = (0x4142, 0x3132, 0x6364)  # Home Assistant: struct ">6s" decoded, "AB12cd"
+    assert decode(label, {(Table.HOLDING, 5 + i): w for i, w in enumerate(words)}) == "AB12cd"
+    assert [(n.where.line, n.key) for n in result.notes] == [
+        (14, "Schedule.structure"),
+        (7, "Yield.device_class"),
+        (9, "Reactive.device_class"),  # its state class stays
+    ]
+    assert entities["reactive"]["ha"]["state_class"] == "measurement"
+
+
+def test_an_entity_left_out_by_the_checks_across_entities_is_told_its_own_reason(
+    tmp_path: Path,
+) -> None:
+    """Two entities dropped from one device each get the row about them, not every row of
+    the device (a package with three such switches read each note three times over)."""
+    sensors = [
+        {"name": "Grid code", "address": 1, "slave": 1, "data_type": "uint32"},
+        {"name": "Grid signed", "address": 2, "slave": 1, "data_type": "int32"},  # crosses
+        {"name": "Mode code", "address": 7, "slave": 1, "data_type": "uint32"},
+        {"name": "Mode signed", "address": 8, "slave": 1, "data_type": "int32"},  # crosses
+    ]
+    hub = {"name": "hub", "type": "tcp", "host": "127.0.0.1", "port": 502, "sensors": sensors}
+    result = convert(tmp_path, yaml.safe_dump({"modbus": [hub]}))
+    kept = set(result.devices[0].mapping["entities"]) if result.devices else set()
+    reasons = {n.key: n.reason for n in result.notes if n.key in ("Grid signed", "Mode signed")}
+    assert kept == {"grid_code", "mode_code"}
+    assert set(reasons) == {"Grid signed", "Mode signed"}
+    assert all(("'grid_code'" in r) != ("'mode_code'" in r) for r in reasons.values())

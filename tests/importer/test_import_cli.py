@@ -3,11 +3,13 @@ and never overwrite; the report goes to stderr; exit 2 only when nothing usable 
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pytest
 
-from bridge.cli import main
+from bridge.app import Bridge
+from bridge.cli import console, main
 from bridge.config import load_config
 
 CONFIG = """\
@@ -86,3 +88,49 @@ def test_a_file_that_is_not_yaml_exits_2(
     source = write(tmp_path, "modbus: [\n")
     assert main(["import", "ha", str(source), "--out", str(tmp_path / "o")]) == 2
     assert "invalid YAML" in capsys.readouterr().err
+
+
+BATTERY = """\
+modbus:
+  - name: Battery inverter
+    type: tcp
+    host: 127.0.0.1
+    port: 5020
+    sensors:
+      - {name: BMS voltage, address: 3, slave: 1, scale: 0.1, unit_of_measurement: V,
+         device_class: voltage, state_class: measurement}
+      - {name: DSP temperature, address: 4, slave: 1, unit_of_measurement: "°C",
+         device_class: temperature}
+      - {name: EMS mode, address: 5, slave: 1}
+"""
+
+
+@pytest.mark.parametrize("fixture", [None, "configuration.yaml", "configuration_2.yaml"])
+def test_an_imported_mapping_loads_with_no_advice_to_edit_the_package(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+    fixture: str | None,
+) -> None:
+    """Names such as "BMS voltage" are the user's: importing, checking and starting the
+    bridge on the imported files name no file of the package (Home Assistant's own test
+    fixtures too)."""
+    data = Path(__file__).parent / "data" / "ha_fixtures"
+    text = BATTERY if fixture is None else (data / fixture).read_text(encoding="utf-8")
+    source = write(tmp_path, text)
+    out = tmp_path / "imported"
+    monkeypatch.setattr(Bridge, "run", _returns)
+    monkeypatch.setattr(console, "configure_logging", lambda *_: None)  # pytest's handlers
+    with caplog.at_level("DEBUG"):
+        assert main(["import", "ha", str(source), "--out", str(out)]) == 0
+        assert main(["check", "-c", str(out / "config.yaml")]) == 0
+        assert main(["mappings", "validate", *map(str, (out / "mappings").iterdir())]) == 0
+        assert main(["run", "-c", str(out / "config.yaml")]) == 0
+    said = [r.getMessage() for r in caplog.records] + capsys.readouterr().err.splitlines()
+    assert [line for line in said if "bridge/" in line or ".py" in line] == []
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
+
+
+async def _returns(_: Bridge) -> None:
+    """Bridge.run for a start that loaded its config (the thing under test is the load)."""

@@ -10,7 +10,7 @@ import pytest
 from pydantic import ValidationError
 
 from bridge.core.convention import ABBREVIATIONS, name_problems
-from bridge.core.mapping import format_validation_errors, mapping_warnings
+from bridge.core.mapping import format_validation_errors, library_problems
 from tests.factory import make_mapping
 
 SETTING = {"address": 1, "access": "rw"}
@@ -19,9 +19,8 @@ OPTIONS = {"m": {"choices": ["a", "b"], "default": "a", "description": "model"}}
 
 
 def rows_of(entities: dict[str, dict[str, Any]], **top: Any) -> list[str]:
-    """The warnings of a mapping that loads all the same (a user's mapping valid before
-    the conventions came keeps working)."""
-    return mapping_warnings(make_mapping(entities, **top))
+    """The library's convention rows of a mapping that loads all the same."""
+    return library_problems(make_mapping(entities, **top))
 
 
 @pytest.mark.parametrize(

@@ -587,7 +587,7 @@ entities:
     model = HEADER.replace("model: T1", "model: [T1]") + entities
     limit = HEADER + "protocol: {max_read_registers: 200, function_codes: [3, 4]}\n" + entities
     rule = HEADER + "protocol: {addressing: {offset: many}, function_codes: [3]}\n" + entities
-    reports = [check_mapping_text(text, "pump.yaml") for text in (model, limit, rule)]
+    reports = [check_mapping_text(text, "pump.yaml", library=True) for text in (model, limit, rule)]
     assert [[row.split(":")[0] for row in report.errors] for report in reports] == [
         ["model", "entities.speed.scale", "entities.level.unit_from"],
         [
@@ -601,12 +601,15 @@ entities:
     assert all(r.warnings == ("entities.coil.name: 'STATUS' is written in capitals: write "
                "it as a word, or add the abbreviation to bridge/core/convention.py "
                "('Relay STATUS')",) for r in reports)  # fmt: skip
+    # a user's file is not held to the library's conventions
+    assert check_mapping_text(model, "pump.yaml").warnings == ()
 
 
 def test_one_error_in_each_layer_is_reported_in_one_run(tmp_path: Path) -> None:
     """Fields (a bad scale), checks across fields and entities (a bit field of a u32, two
     values on one register), the protocol (a read limit Modbus does not allow, a coil on a
-    device without function 1) and the conventions (a name in capitals, as a warning)."""
+    device without function 1) and, for a file of the library, its conventions (a name in
+    capitals, as a warning)."""
     path = tmp_path / "layers.yaml"
     path.write_text(
         HEADER
@@ -620,7 +623,7 @@ entities:
   mode: {name: Motor MODE, address: 8}
 """
     )
-    report = check_mapping_file(path)
+    report = check_mapping_file(path, library=True)
     assert report.mapping is None
     assert report.errors == (
         "protocol.max_read_registers: Input should be less than or equal to 125",
