@@ -226,7 +226,8 @@ def last_run(hass: HomeAssistant) -> list[LogRecord]:
     """The records of Home Assistant's run before its last start (it keeps that log as
     home-assistant.log.1), stop included."""
     previous = hass.config_dir / "home-assistant.log.1"
-    return parse_log(previous.read_text(errors="replace")) if previous.exists() else []
+    assert previous.exists(), "Home Assistant kept no log of its previous run"
+    return parse_log(previous.read_text(errors="replace"))
 
 
 async def test_a_packages_switches_write_the_same_words_through_the_bridge(
