@@ -144,6 +144,8 @@ def device(tmp_path: Path, broker: Broker) -> Simulator:
     """The simulated inverter, serving the import's mapping, at its start values."""
     probe = imported(tmp_path, 502, broker, "unused", MODBUS)
     mapping = load_mapping(probe.parent / "mappings" / f"{DEVICE}.yaml")
+    dropped = [key for key in [*START, *(s.key for s in SWITCHES)] if key not in mapping.entities]
+    assert not dropped, f"the import dropped {dropped}: {probe.parent / 'import-report.txt'}"
     sim = Simulator([SimulatedUnit(1, mapping)], tick=0.0)  # values stay still
     sim.reactions.append(backup_follows)
     at_start(sim)
