@@ -19,8 +19,10 @@ before calling the hook (simruntime.py:62-66), which would skip latency and quir
   the hook the number of 16-bit words, simruntime.py:89-93);
 * writes: every write request a live unit receives is appended to ``writes`` (refused ones
   too) and the moment it arrived (``time.monotonic()``, before any latency) to
-  ``write_times``, then checked and stored. FC05 arrives through ``_CoilWord``, which passes the raw
-  16-bit word (pymodbus' own FC05 only knows on/off) and echoes it back;
+  ``write_times``, then checked and stored; then each of ``reactions`` (a test's device
+  logic: a status register that follows a command register) answers the cells the
+  accepted write changes besides its own. FC05 arrives through ``_CoilWord``, which passes
+  the raw 16-bit word (pymodbus' own FC05 only knows on/off) and echoes it back;
 * dead units and unknown unit ids: the incoming ``trace_pdu`` hook drops the request, so
   nothing is executed and nothing is sent (requesthandler.py:73 handles no empty PDU);
 * unit 0 is a device that answers every unit id no other unit has, as many Modbus TCP
@@ -30,7 +32,7 @@ before calling the hook (simruntime.py:62-66), which would skip latency and quir
 * counter faults (``counter_fault``, ``schedule``): the next reads of a counter answer
   what ``bridge/core/simulation_counter.py`` says instead of the image.
 
-One module, about 500 lines, on purpose: it is the one place that reaches into pymodbus'
+One module, about 520 lines, on purpose: it is the one place that reaches into pymodbus'
 server (its hooks, its SimDevice, its context variable), and every part of it is one of
 those hooks or what they call; the decisions themselves are in bridge/core.
 """
@@ -145,7 +147,12 @@ def two_byte_count_frame(frame: bytes) -> bytes:
 class _Device:
     """One simulated unit: its image, its rules, and the pymodbus hook that applies them."""
 
-    def __init__(self, spec: SimulatedUnit, record: Callable[[int, Write, float], None]) -> None:
+    def __init__(
+        self,
+        spec: SimulatedUnit,
+        record: Callable[[int, Write, float], None],
+        react: Callable[[int, Write], dict[Cell, int]],
+    ) -> None:
         self.unit = spec.unit
         self.mapping = spec.mapping
         self.points = spec.mapping.points(spec.options)
@@ -156,6 +163,7 @@ class _Device:
         self.quirks = spec.quirks
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
+        self.react = react
         self.unlocked = False  # Quirks.password: the right password was written
         self.misreads: list[dict[Cell, int]] = []  # answers the next reads get (counter faults)
         self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)  # the simulator's, shared
@@ -221,6 +229,7 @@ class _Device:
                     self._take_password(write)
                 self.image |= self.rules.toggled(write, self.image)
                 self.image |= follow(self.behaviour, write, self.image)  # start, stop, reset
+                self.image |= self.react(self.unit, write)
         return None if code is None else ExcCodes(code)
 
     def moving(self) -> tuple[Mover, ...]:
@@ -311,13 +320,18 @@ class Simulator:
     ``write_times[i]`` is when ``writes[i]`` arrived (``time.monotonic()``, before the
     unit's latency), for measuring how long a command took to reach the wire. ``requests``
     lists the latest requests live units received, reads and writes, as ``(unit, function
-    code, address)``: the order a bus served its devices in."""
+    code, address)``: the order a bus served its devices in. Each of ``reactions``, called
+    with ``(unit, Write)`` once a unit stored an accepted write, answers the other cells
+    that write changes (``{(Table.HOLDING, 8465): 1}``)."""
 
     def __init__(self, units: Sequence[SimulatedUnit], *, seed: int = 0, tick: float = 1.0) -> None:
         self.writes: list[tuple[int, Write]] = []
         self.write_times: list[float] = []
+        self.reactions: list[Callable[[int, Write], dict[Cell, int]]] = []
         self.ready = asyncio.Event()
-        self._devices = {spec.unit: _Device(spec, self._record_write) for spec in units}
+        self._devices = {
+            spec.unit: _Device(spec, self._record_write, self._react) for spec in units
+        }
         self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)
         for device in self._devices.values():
             device.requests = self.requests
@@ -400,6 +414,12 @@ class Simulator:
     def _record_write(self, unit: int, write: Write, received: float) -> None:
         self.writes.append((unit, write))
         self.write_times.append(received)
+
+    def _react(self, unit: int, write: Write) -> dict[Cell, int]:
+        changed: dict[Cell, int] = {}
+        for reaction in self.reactions:
+            changed |= reaction(unit, write)
+        return changed
 
     def _device(self, unit: int) -> _Device:
         try:

@@ -77,10 +77,11 @@ ENTITY_IDS = {
 }
 
 
-def imported(tmp_path: Path, port: int, broker: Broker, prefix: str) -> Path:
-    """``import ha`` of the block, pointed at the test's broker (discovery on ``prefix``)."""
+def imported(tmp_path: Path, port: int, broker: Broker, prefix: str, modbus: str = MODBUS) -> Path:
+    """``import ha`` of the block (``modbus``, its ``{port}`` filled in), pointed at the
+    test's broker (discovery on ``prefix``)."""
     source = tmp_path / "configuration.yaml"
-    source.write_text(MODBUS.format(port=port), encoding="utf-8")
+    source.write_text(modbus.format(port=port), encoding="utf-8")
     out = tmp_path / f"bridge-{prefix}"
     assert main(["import", "ha", str(source), "--out", str(out)]) == 0
     config = out / "config.yaml"

@@ -168,6 +168,31 @@ async def test_a_write_sticks_and_reads_back(name: str) -> None:
 
 
 @pytest.mark.asyncio
+async def test_a_reaction_changes_other_cells_after_an_accepted_write_only() -> None:
+    """A status register that follows a command register: the reaction's cells are what
+    the next read answers; a refused write (to a read-only register) reaches no reaction."""
+    sim = simulator((1, "soft_starter"))
+    point = mapping("soft_starter").points()["soft_start_time"]
+    status = (Table.HOLDING, point.address + 1)
+    seen: list[Write] = []
+
+    def follow(unit: int, write: Write) -> dict[tuple[Table, int], int]:
+        seen.append(write)
+        return {status: write.values[0] + 1000}
+
+    sim.reactions.append(follow)
+    (write,) = encode(point, 20, sim.image(1))
+    refused = Write(6, Table.HOLDING, 0x7FFF, (5,))
+    async with tcp(sim) as conn:
+        assert await exception_of(conn, refused) == 2
+        assert not isinstance(await call(conn, write), ExceptionResponse)
+        after = await read(conn, *status)
+    assert seen == [write]
+    assert after == (write.values[0] + 1000,)
+    assert sim.writes == [(1, refused), (1, write)]
+
+
+@pytest.mark.asyncio
 async def test_set_value_is_what_the_client_reads() -> None:
     sim = simulator((1, "nastec_vasco"))
     sim.set_value(1, "alarm_dry_running", True)
