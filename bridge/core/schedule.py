@@ -108,7 +108,10 @@ class Schedule:
         """The first tick of ``interval`` after ``now``."""
         if not math.isfinite(interval):
             return math.inf
-        return self.origin + (math.floor((now - self.origin) / interval) + 1) * interval
+        step = math.floor((now - self.origin) / interval) + 1
+        while self.origin + step * interval <= now:  # float rounding put it on ``now``
+            step += 1
+        return self.origin + step * interval
 
     def wake(self) -> float:
         """When the next interval is due (inf when none will be)."""
