@@ -40,6 +40,7 @@ from __future__ import annotations
 import asyncio
 import random
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
@@ -57,7 +58,7 @@ from bridge.core.address import to_wire
 from bridge.core.codec import Value, decode
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping, Point
-from bridge.core.request import Write
+from bridge.core.request import Read, Write
 from bridge.core.simulation import (
     Cell,
     Mover,
@@ -92,6 +93,7 @@ __all__ = ["Quirks", "SimulatedUnit", "Simulator", "two_byte_count_frame"]
 
 _TABLES = {1: Table.COIL, 5: Table.COIL, 15: Table.COIL, 2: Table.DISCRETE, 4: Table.INPUT}
 _BIT_SPACE = 4096  # coils/discrete inputs 0..4095 exist; above, pymodbus answers 02 itself
+READ_LOG = 100_000  # reads a unit remembers (Simulator.reads), oldest dropped first
 _BIT_COUNT: ContextVar[int] = ContextVar("bit_count", default=1)
 
 
@@ -153,6 +155,7 @@ class _Device:
         self.quirks = spec.quirks
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
+        self.reads: deque[tuple[Read, float]] = deque(maxlen=READ_LOG)  # answered, with when
         self.unlocked = False  # Quirks.password: the right password was written
         self.misreads: list[dict[Cell, int]] = []  # answers the next reads get (counter faults)
 
@@ -206,6 +209,7 @@ class _Device:
             if code is None:
                 self._fill(table, start, address, count, registers)
                 self._count_on_read(table, address, count)
+                self.reads.append((Read(table, address, size), received))
         else:
             write = Write(function_code, table, address, tuple(int(v) for v in values))
             self.record(self.unit, write, received)
@@ -337,6 +341,11 @@ class Simulator:
 
     def image(self, unit: int) -> dict[Cell, int]:
         return dict(self._device(unit).image)
+
+    def reads(self, unit: int) -> list[tuple[Read, float]]:
+        """The reads the unit answered (the last ``READ_LOG``), each with when it arrived
+        (``time.monotonic()``): what a test or bench counts polls by."""
+        return list(self._device(unit).reads)
 
     def value(self, unit: int, key: str) -> Value:
         device = self._device(unit)
