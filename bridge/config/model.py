@@ -93,14 +93,14 @@ Bus = Annotated[SerialBus | TcpBus, Field(discriminator="transport")]
 class PollConfig(Strict):
     """The device's named poll intervals, and intervals of its own for some entities."""
 
-    fast: Duration = Field(2.0, gt=0, description="the interval of the mapping's fast values")
-    slow: Duration = Field(60.0, gt=0, description="the interval of the mapping's slow values")
+    fast: Duration = Field(2.0, gt=0)
+    slow: Duration = Field(60.0, gt=0)
     entities: dict[Annotated[str, Field(min_length=1, max_length=200)], PollChoice] = Field(
         default_factory=dict,
         max_length=10000,
-        description="entity key or glob (`grid_*`) -> fast, slow, once or an interval "
-        "(0.1 s to a day); wins over the mapping's `poll`; an exact key wins over a glob, "
-        "else the first glob that matches in the order written",
+        description="entity key or glob (`grid_*`) -> `fast`, `slow`, `once` or an interval "
+        "(seconds or `10s`, 0.1 s to a day), over the mapping's `poll`; an exact key wins "
+        "over a glob, else the first glob that matches; one that names no entity is an error",
     )
 
     def rule(self, fast: float | None = None) -> PollRule:
