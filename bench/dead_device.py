@@ -45,7 +45,7 @@ def stamp_fast_polls(devices: dict[str, DevicePoller], stamps: dict[str, list[fl
             if FAST in classes or PollClass.FAST in classes:  # type: ignore[operator]
                 stamps[device_id].append(time.monotonic())
 
-        poller.poll = timed  # type: ignore[method-assign]
+        poller.poll = timed  # type: ignore[method-assign,assignment]
 
 
 async def run(seconds: float, with_dead: bool) -> dict[str, float]:
