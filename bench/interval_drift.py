@@ -59,7 +59,8 @@ def stamp_passes(poller: DevicePoller, stamps: list[tuple[float, frozenset[float
 async def run(seconds: float, folder: Path) -> None:
     path = folder / "three_intervals.yaml"
     path.write_text(MAPPING)
-    sim = Simulator([SimulatedUnit(1, load_mapping(path), quirks=Quirks(latency=0.02))], tick=0)
+    unit = SimulatedUnit(1, load_mapping(path), quirks=Quirks(latency=0.02))
+    sim = Simulator([unit], tick=0, read_log=100_000)
     server = asyncio.create_task(sim.serve_tcp("127.0.0.1", 0))
     await sim.ready.wait()
     device = {

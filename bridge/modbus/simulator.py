@@ -93,7 +93,6 @@ __all__ = ["Quirks", "SimulatedUnit", "Simulator", "two_byte_count_frame"]
 
 _TABLES = {1: Table.COIL, 5: Table.COIL, 15: Table.COIL, 2: Table.DISCRETE, 4: Table.INPUT}
 _BIT_SPACE = 4096  # coils/discrete inputs 0..4095 exist; above, pymodbus answers 02 itself
-READ_LOG = 100_000  # reads a unit remembers (Simulator.reads), oldest dropped first
 _BIT_COUNT: ContextVar[int] = ContextVar("bit_count", default=1)
 
 
@@ -144,7 +143,9 @@ def two_byte_count_frame(frame: bytes) -> bytes:
 class _Device:
     """One simulated unit: its image, its rules, and the pymodbus hook that applies them."""
 
-    def __init__(self, spec: SimulatedUnit, record: Callable[[int, Write, float], None]) -> None:
+    def __init__(
+        self, spec: SimulatedUnit, record: Callable[[int, Write, float], None], read_log: int
+    ) -> None:
         self.unit = spec.unit
         self.mapping = spec.mapping
         self.points = spec.mapping.points(spec.options)
@@ -155,7 +156,7 @@ class _Device:
         self.quirks = spec.quirks
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
-        self.reads: deque[tuple[Read, float]] = deque(maxlen=READ_LOG)  # answered, with when
+        self.reads: deque[tuple[Read, float]] = deque(maxlen=read_log)  # answered, with when
         self.unlocked = False  # Quirks.password: the right password was written
         self.misreads: list[dict[Cell, int]] = []  # answers the next reads get (counter faults)
 
@@ -308,13 +309,21 @@ class Simulator:
     """Simulated units on one bus (TCP port or serial line). ``writes`` lists every write
     request a live unit received, in order, as ``(unit, Write)``: refused ones included;
     ``write_times[i]`` is when ``writes[i]`` arrived (``time.monotonic()``, before the
-    unit's latency), for measuring how long a command took to reach the wire."""
+    unit's latency), for measuring how long a command took to reach the wire. With
+    ``read_log``, each unit keeps its last that many answered reads (``reads``)."""
 
-    def __init__(self, units: Sequence[SimulatedUnit], *, seed: int = 0, tick: float = 1.0) -> None:
+    def __init__(
+        self,
+        units: Sequence[SimulatedUnit],
+        *,
+        seed: int = 0,
+        tick: float = 1.0,
+        read_log: int = 0,
+    ) -> None:
         self.writes: list[tuple[int, Write]] = []
         self.write_times: list[float] = []
         self.ready = asyncio.Event()
-        self._devices = {spec.unit: _Device(spec, self._record_write) for spec in units}
+        self._devices = {spec.unit: _Device(spec, self._record_write, read_log) for spec in units}
         self._rng = random.Random(seed)  # noqa: S311 - simulated readings, not secrets
         self._tick = tick
         self._port: int | None = None
@@ -343,7 +352,7 @@ class Simulator:
         return dict(self._device(unit).image)
 
     def reads(self, unit: int) -> list[tuple[Read, float]]:
-        """The reads the unit answered (the last ``READ_LOG``), each with when it arrived
+        """The reads the unit answered (the last ``read_log``), each with when it arrived
         (``time.monotonic()``): what a test or bench counts polls by."""
         return list(self._device(unit).reads)
 

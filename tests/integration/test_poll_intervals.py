@@ -64,7 +64,7 @@ async def test_an_entity_with_its_own_short_interval_is_read_more_often(
 ) -> None:
     path = tmp_path / "intervals.yaml"
     path.write_text(MAPPING)
-    sim = Simulator([SimulatedUnit(1, load_mapping(path))], tick=0)
+    sim = Simulator([SimulatedUnit(1, load_mapping(path))], tick=0, read_log=10_000)
 
     def reads(table: Table) -> int:
         return sum(1 for read, _ in sim.reads(1) if read.table is table)
