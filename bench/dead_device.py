@@ -32,7 +32,8 @@ FAST = 0.5
 
 
 def stamp_fast_polls(devices: dict[str, DevicePoller], stamps: dict[str, list[float]]) -> None:
-    """Record in ``stamps`` when each device finished a poll of its fast class."""
+    """Record in ``stamps`` when each device finished a poll of its fast class (the poll
+    loop passes the intervals due in seconds: the fast one is ``FAST``)."""
     for device_id, poller in devices.items():
         original = poller.poll
         stamps[device_id] = []
@@ -41,10 +42,10 @@ def stamp_fast_polls(devices: dict[str, DevicePoller], stamps: dict[str, list[fl
             classes: object, device_id: str = device_id, original: object = original
         ) -> None:
             await original(classes)  # type: ignore[operator]
-            if PollClass.FAST in classes:  # type: ignore[operator]
+            if FAST in classes or PollClass.FAST in classes:  # type: ignore[operator]
                 stamps[device_id].append(time.monotonic())
 
-        poller.poll = timed  # type: ignore[method-assign]
+        poller.poll = timed  # type: ignore[method-assign,assignment]
 
 
 async def run(seconds: float, with_dead: bool) -> dict[str, float]:

@@ -142,6 +142,7 @@ class DiscoveryPublisher:
             allow_dangerous_writes=device.allow_dangerous_writes,
             fast_interval=poller.intervals[PollClass.FAST],
             slow_interval=poller.intervals[PollClass.SLOW],
+            intervals=poller.state.intervals,
         )
 
     def sources(self, poller: DevicePoller) -> frozenset[str]:

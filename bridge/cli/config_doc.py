@@ -77,7 +77,7 @@ NOTES: dict[str, str] = {
     "DeviceConfig.id": "stable id: the MQTT topic `<base>/<id>` and Home Assistant ids",
     "DeviceConfig.name": "name shown in Home Assistant (default: from the id)",
     "DeviceConfig.bus": "id of the bus the device is on",
-    "DeviceConfig.poll": "poll intervals of the mapping's fast and slow values",
+    "DeviceConfig.poll": "poll intervals: the mapping's fast and slow values, and per entity",
     "DeviceConfig.options": "model options the mapping declares (`mappings show` lists them)",
     "DeviceConfig.protocol": "what this unit allows beyond the mapping's protocol rules",
     "DeviceConfig.enabled": "false: keep the device in the file but do not poll it",

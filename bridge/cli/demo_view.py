@@ -145,11 +145,12 @@ def _state(poller: DevicePoller) -> str:
 def _samples(poller: DevicePoller) -> list[str]:
     """A few fast-polled measurements with their units (not raw words, codes or flags)."""
     shown = []
+    fast = poller.intervals[PollClass.FAST]
     for key in published(poller.points):
         point = poller.points[key]
         value = poller.values.get(key)
         entity = point.entity
-        if entity.poll_class is not PollClass.FAST or entity.ha.state_class != "measurement":
+        if poller.state.intervals[key] > fast or entity.ha.state_class != "measurement":
             continue
         if not isinstance(value, int | float) or isinstance(value, bool):
             continue

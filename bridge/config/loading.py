@@ -176,6 +176,8 @@ def load_device_mapping(
         if key not in counters:
             known = ", ".join(sorted(counters)) or "none"
             errors.append(f"{where}.counter_confirm.{key}: not a counter of the mapping ({known})")
+    for pattern in device.poll.rule().unmatched(mapping.entities):
+        errors.append(f"{where}.poll.entities.{pattern}: no entity of {mapping.model} matches")
     if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
         errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
     return mapping, errors

@@ -17,11 +17,22 @@ from collections.abc import Collection, Iterable, Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
 
-from pydantic import Field, IPvAnyAddress, SecretStr, field_validator, model_validator
+from pydantic import (
+    BeforeValidator,
+    Field,
+    IPvAnyAddress,
+    SecretStr,
+    field_validator,
+    model_validator,
+)
 
 from bridge.config.field import FilePath, Strict, one_source, secret_of
 from bridge.config.mqtt import MqttConfig
 from bridge.core.duration import Duration
+from bridge.core.entity import PollClass, parse_poll
+from bridge.core.schedule import PollRule
+
+PollChoice = Annotated[PollClass | float, BeforeValidator(parse_poll)]
 
 _ID = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 MAX_SERIAL_UNIT = 247
@@ -87,8 +98,22 @@ Bus = Annotated[SerialBus | TcpBus, Field(discriminator="transport")]
 
 
 class PollConfig(Strict):
+    """The device's named poll intervals, and intervals of its own for some entities."""
+
     fast: Duration = Field(2.0, gt=0)
     slow: Duration = Field(60.0, gt=0)
+    entities: dict[Annotated[str, Field(min_length=1, max_length=200)], PollChoice] = Field(
+        default_factory=dict,
+        max_length=10000,
+        description="entity key or glob (`grid_*`) -> `fast`, `slow`, `once` or an interval "
+        "(seconds or `10s`, 0.1 s to 31 days), over the mapping's `poll`; an exact key wins "
+        "over a glob, else the first glob that matches; one that names no entity is an error",
+    )
+
+    def rule(self, fast: float | None = None) -> PollRule:
+        """The rule that resolves each entity's interval (``fast``: a shorter fast)."""
+        chosen = tuple(self.entities.items())
+        return PollRule(self.fast if fast is None else fast, self.slow, chosen)
 
 
 class ProtocolOverride(Strict):

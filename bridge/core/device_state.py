@@ -2,10 +2,11 @@
 
 Its register image (every address as last read or written), its decoded values, the
 refusals it taught (bridge/core/refusal_memory.py), the registers per read it showed it
-takes, and the read limits and poll plans that follow from them (planned once, planned
-again when a refusal is learnt, answered again or re-checked). The guard of its dangerous
-bits (bridge/core/guard.py) is here too: this mapping's, joined with the mappings the
-device had before.
+takes, and the read limits and poll plans that follow from them (one plan per set of
+intervals due together, bridge/core/schedule.py; planned once, planned again when a
+refusal is learnt, answered again or re-checked). The guard of its dangerous bits
+(bridge/core/guard.py) is here too: this mapping's, joined with the mappings the device
+had before.
 
 The modbus edge feeds it what the bus answered (``keep``, ``store``) and asks it what to
 read (``plan``, ``reads_for``). Nothing here waits, sends, logs or notifies: a method whose
@@ -28,20 +29,21 @@ from datetime import datetime
 
 from bridge.core.codec import Value, decode
 from bridge.core.counters import Kind, Reading, counters_of
-from bridge.core.entity import PollClass
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Mapping, Point, printed_address
 from bridge.core.planner import Address, ReadLimits, addresses_of, limits_for, plan_reads
 from bridge.core.protocol import Protocol
 from bridge.core.refusal_memory import RefusalMemory
 from bridge.core.request import Read, Write
+from bridge.core.schedule import PollRule, PollSpec
 from bridge.core.state import published
 from bridge.core.timing import LinkTiming
 from bridge.core.write_plan import stored
 from bridge.errors import MissingDataError
 
 NO_LIMIT = 0x10000  # more registers than any read asks for
-_KEPT = 64  # key sets whose sharers are kept (poll classes, a command's keys)
+_KEPT = 64  # key sets whose sharers are kept (due intervals' keys, a command's keys)
+DEFAULT_RULE = PollRule()
 
 
 class DeviceState:
@@ -56,11 +58,13 @@ class DeviceState:
         recheck: float,
         guard: Guard = UNGUARDED,
         confirm: dict[str, int] | None = None,
+        poll: PollRule = DEFAULT_RULE,
     ) -> None:
         """``mapping`` with the device's protocol overrides applied; ``options`` its option
         values; ``recheck``: seconds a learnt refusal is trusted; ``guard``: what the
         mappings the device had before guarded; ``confirm``: lower readings in a row that
-        confirm a counter's reset, by key (else the entity's, else counters.CONFIRM)."""
+        confirm a counter's reset, by key (else the entity's, else counters.CONFIRM);
+        ``poll``: the device's intervals, which resolve each entity's (``intervals``)."""
         self.mapping = mapping
         self.protocol: Protocol = mapping.protocol
         self.points: dict[str, Point] = mapping.points(options)
@@ -76,8 +80,9 @@ class DeviceState:
         self.last_reset: dict[str, str] = {}  # a total counter's last confirmed reset
         self.refusals = RefusalMemory(recheck)
         self.max_read: int | None = None  # learnt: fewer registers per read than mapped
-        self._plans: dict[PollClass, tuple[Read, ...]] = {}
-        self._keys: dict[frozenset[PollClass], tuple[str, ...]] = {}
+        self.rule = poll
+        self.intervals = poll.intervals({k: p.entity for k, p in self.points.items()})
+        self._plans: dict[frozenset[float], tuple[tuple[Read, ...], tuple[str, ...]]] = {}
         self.published = frozenset(published(self.points))  # keys whose values go out
         self._limits: ReadLimits | None = None
         self._readers: dict[Address, tuple[str, ...]] | None = None
@@ -101,24 +106,31 @@ class DeviceState:
             )
         return self._limits
 
-    def plan(self, classes: Iterable[PollClass]) -> tuple[Read, ...]:
-        """The reads of these poll classes, in class order, as planned now."""
-        reads: list[Read] = []
-        for poll_class in sorted(set(classes)):
-            if poll_class not in self._plans:
-                members = [p for p in self.points.values() if p.entity.poll_class is poll_class]
-                self._plans[poll_class] = plan_reads(members, self.limits()).reads
-            reads.extend(self._plans[poll_class])
-        return tuple(reads)
+    def plan(self, due: Iterable[PollSpec]) -> tuple[Read, ...]:
+        """The reads of the entities whose interval is due (``fast``/``slow``/``once`` or
+        seconds), planned as one set: entities due together share reads."""
+        return self._planned(due)[0]
 
-    def keys_of(self, classes: Iterable[PollClass]) -> tuple[str, ...]:
-        """The keys of the points of these poll classes, in mapping order."""
-        chosen = frozenset(classes)
-        if chosen not in self._keys:
-            self._keys[chosen] = tuple(
-                k for k, p in self.points.items() if p.entity.poll_class in chosen
+    def keys_of(self, due: Iterable[PollSpec]) -> tuple[str, ...]:
+        """The keys a pass over ``plan(due)`` decodes, in mapping order: those due, and
+        those not due whose registers all lie in its reads (read along for free in a hole
+        the planner read through: their value is as fresh as the others')."""
+        return self._planned(due)[1]
+
+    def _planned(self, due: Iterable[PollSpec]) -> tuple[tuple[Read, ...], tuple[str, ...]]:
+        chosen = frozenset(self.rule.seconds(spec) for spec in due)
+        if chosen not in self._plans:
+            members = [p for k, p in self.points.items() if self.intervals[k] in chosen]
+            reads = plan_reads(members, self.limits()).reads
+            covered = {(r.table, a) for r in reads for a in r.span}
+            keys = tuple(
+                k
+                for k, p in self.points.items()
+                if self.intervals[k] in chosen
+                or (p.entity.readable and {(p.table, a) for a in p.span} <= covered)
             )
-        return self._keys[chosen]
+            self._plans[chosen] = (reads, keys)
+        return self._plans[chosen]
 
     def readers_of(self, cells: Iterable[Address]) -> tuple[str, ...]:
         """The readable keys with a register (or bit) among ``cells``, in mapping order:

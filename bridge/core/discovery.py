@@ -38,7 +38,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping as AnyMapping
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Literal
 
@@ -89,6 +89,7 @@ class DeviceInfo:
     allow_dangerous_writes: bool
     fast_interval: float
     slow_interval: float
+    intervals: AnyMapping[str, float] = field(default_factory=dict)  # each key's, resolved
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +128,7 @@ def build_device_discovery(
         allow_dangerous_writes=device.allow_dangerous_writes,
         fast_interval=device.fast_interval,
         slow_interval=device.slow_interval,
+        intervals=device.intervals,
         state_refresh=state_refresh,
         units=units,
         limits=limits,

@@ -19,6 +19,7 @@ write-only components (buttons; numbers and texts, none shipped) have no state t
 from __future__ import annotations
 
 import json
+import math
 import re
 import sys
 from collections.abc import Callable
@@ -69,6 +70,7 @@ class ComponentContext:
     state_refresh: float
     units: AnyMapping[str, str | None]
     limits: AnyMapping[str, Limits]
+    intervals: AnyMapping[str, float] = field(default_factory=dict)  # key -> its poll interval
     readings: AnyMapping[str, Value] = field(default_factory=dict)
     device_name: str = ""
     keys: frozenset[str] = frozenset()  # every key of the mapping (entity ids kept apart)
@@ -77,10 +79,19 @@ class ComponentContext:
     def unique_prefix(self) -> str:
         return f"{self.topics.base}_{self.device_id}"
 
-    def expire_after(self, poll: PollClass) -> int:
+    def expire_after(self, poll: PollClass | float, key: str = "") -> int:
         """Seconds after which an unrefreshed value is stale: two state refreshes plus
-        one poll (every value is republished at least every ``state_refresh``)."""
-        interval = self.fast_interval if poll is PollClass.FAST else self.slow_interval
+        one poll (every value is republished at least every ``state_refresh``), so always
+        longer than the interval, as Home Assistant needs. The poll is the key's interval
+        as its poller resolved it, else ``poll``'s: an interval of its own, ``fast``, or
+        ``slow`` (``once`` too)."""
+        if key in self.intervals:
+            interval = self.intervals[key]
+        elif poll is PollClass.FAST:
+            interval = self.fast_interval
+        else:
+            interval = self.slow_interval if isinstance(poll, PollClass) else poll
+        interval = interval if math.isfinite(interval) else self.slow_interval
         return int(2 * self.state_refresh + interval)
 
 
@@ -173,7 +184,7 @@ def component_config(key: str, entity: Entity, context: ComponentContext) -> Con
         config["icon"] = entity.ha.icon
     config |= _BUILDERS[platform](key, entity, context)
     if platform in _READ_ONLY:
-        config["expire_after"] = context.expire_after(entity.poll_class)
+        config["expire_after"] = context.expire_after(entity.poll_spec, key)
     return config
 
 

@@ -22,10 +22,10 @@ from enum import StrEnum
 from functools import cached_property
 from typing import Annotated, Any, Self
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from bridge.core.address import PrintedAddress
-from bridge.core.duration import Duration
+from bridge.core.duration import Duration, parse_duration
 
 
 class Table(StrEnum):
@@ -77,6 +77,31 @@ class PollClass(StrEnum):
     FAST = "fast"
     SLOW = "slow"
     ONCE = "once"
+
+
+MIN_INTERVAL = 0.1  # seconds: the shortest own interval (a bus answers in tens of ms)
+MAX_INTERVAL = 31 * 86400.0  # seconds: 31 days, the longest own interval (a weekly read fits)
+
+PollSpec = PollClass | float
+
+
+def parse_poll(value: object) -> PollSpec:
+    """``fast``/``slow``/``once`` or an interval (``10``, ``"10s"``, ``"1m"``) within
+    ``MIN_INTERVAL``..``MAX_INTERVAL``; raise ValueError with the accepted forms."""
+    if isinstance(value, PollClass):
+        return value
+    if isinstance(value, str) and value in PollClass.__members__.values():
+        return PollClass(value)
+    try:
+        seconds = parse_duration(value)
+    except ValueError as exc:
+        raise ValueError(f"poll must be fast, slow, once or an interval: {exc}") from None
+    if not MIN_INTERVAL <= seconds <= MAX_INTERVAL:
+        raise ValueError(
+            f"a poll interval must be within {MIN_INTERVAL:g} s and {MAX_INTERVAL:.0f} s "
+            f"(31 days), not {seconds:.10g} s"
+        )
+    return seconds
 
 
 class Component(StrEnum):
@@ -372,7 +397,11 @@ class Entity(BaseModel):
     secret: bool = Field(False, description="never published (passwords)")
     alarm: bool = Field(False, description="an alarm: bool when on, enum when not normal")
     normal: tuple[int, ...] = Field((0,), description="raw enum values that are not an alarm")
-    poll: PollClass | None = Field(None, description="default: once/slow/fast by kind")
+    poll: Annotated[PollClass | float, BeforeValidator(parse_poll)] | None = Field(
+        None,
+        description="fast, slow, once or its own interval (seconds, or '10s', '5m'; "
+        "0.1 s to 31 days); default: slow when writable, else fast",
+    )
     confidence: Confidence = Confidence.HIGH
     when: dict[str, str | list[str]] = Field(
         default_factory=dict, description="present only for these device option values"
@@ -459,10 +488,18 @@ class Entity(BaseModel):
         return table.get(self.kind, Component.SENSOR)
 
     @cached_property
-    def poll_class(self) -> PollClass:
+    def poll_spec(self) -> PollClass | float:
+        """``poll``, else ``slow`` when writable, ``fast`` when not (bridge/core/schedule.py
+        turns it into seconds)."""
         if self.poll is not None:
             return self.poll
         return PollClass.SLOW if self.writable else PollClass.FAST
+
+    @cached_property
+    def poll_class(self) -> PollClass | None:
+        """The named poll class, or None when the entity has an interval of its own."""
+        spec = self.poll_spec
+        return spec if isinstance(spec, PollClass) else None
 
     @cached_property
     def shown_as_diagnostic(self) -> bool:
@@ -505,6 +542,7 @@ _DERIVED = (
     "writable",
     "kind",
     "component",
+    "poll_spec",
     "poll_class",
     "shown_as_diagnostic",
     "enabled_by_default",

@@ -22,6 +22,13 @@ go to fewer reads, then to the longer first block. A point with no readable way 
 own registers unreadable, or its atom across a segment boundary) is left out and named in
 ``Plan.unplannable``; ``plan_reads`` does not raise.
 
+Across poll intervals (bridge/core/schedule.py) the planner is given the points due now:
+every interval due in one pass is planned as one set, so entities due together share
+reads. A point not due is never a reason to read: it is a hole like an unmapped register,
+read through only under the rule above (one block costs no more than two reads, and the
+device allows the hole). Such a point lying in a hole that was read comes along for free,
+and it is decoded too (``DeviceState.keys_of``): its value is as fresh as its neighbours'.
+
 When a device refuses a merged block (illegal address or quantity), the engine bisects:
 
     def locate(block):                       # the device refused block

@@ -14,7 +14,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from bridge.core.entity import Entity
+from bridge.core.entity import MAX_INTERVAL, MIN_INTERVAL, Entity
 from bridge.core.hass import presentation_problems
 from bridge.core.mapping import Mapping, format_validation_errors
 from bridge.importer.result import Import
@@ -100,3 +100,11 @@ def whole(entities: dict[str, Any], drafts: list[Draft], result: Import) -> dict
             own = [r for r in rows if r.startswith(f"entities.{key}.") or f"'{key}'" in r]
             result.note(where.get(name, Where(result.source, 1)), name, "; ".join(own or rows))
     return entities
+
+
+def entity_poll(seconds: float, named: dict[float, str]) -> str | float:
+    """An entity's ``poll``: the name of ``seconds`` in ``named`` (``{0: "once", 15:
+    "fast"}``), else ``seconds`` itself within the bounds a mapping takes."""
+    if seconds in named:
+        return named[seconds]
+    return min(max(seconds, MIN_INTERVAL), MAX_INTERVAL)

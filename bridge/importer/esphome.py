@@ -15,7 +15,7 @@ from typing import Any
 
 from bridge.core.duration import parse_duration
 from bridge.importer import esphome_entity
-from bridge.importer.draft import Draft, mapping_document, validated, whole
+from bridge.importer.draft import Draft, entity_poll, mapping_document, validated, whole
 from bridge.importer.naming import identifier, unique_key
 from bridge.importer.result import MAX_ENTITIES, Import, ImportedDevice
 from bridge.importer.source import Node, Where
@@ -193,21 +193,16 @@ def _device(
         result.note(controller.at("address"), f"{name}.address", "not a unit 1..247")
         return
     interval = _seconds(controller.get("update_interval", "60s")) or 60.0
+    skips = [d.scan_interval for d in drafts if d.scan_interval]
+    named = {max(skips, default=0) + 1: "slow", 1: "fast"}  # updates from one read to the next
     entities: dict[str, Any] = {}
     for draft in drafts:
-        skip = draft.fields.pop("skip_updates", 0)
-        poll = "slow" if skip else "fast"
-        fields = draft.fields | {"poll": poll, "ha": draft.ha}
-        checked = validated(draft, fields, result)
+        draft.fields.pop("skip_updates", None)
+        updates = draft.scan_interval + 1  # skip_updates + 1: every n-th update exactly
+        poll = named.get(updates) or entity_poll(interval * updates, {})
+        checked = validated(draft, draft.fields | {"poll": poll, "ha": draft.ha}, result)
         if checked is not None:
             entities[unique_key(draft.name, entities)] = checked
-    skips = [d.scan_interval for d in drafts if d.scan_interval]
-    for draft in drafts:
-        if draft.scan_interval and draft.scan_interval != max(skips):
-            reason = f"read with the slow poll (every {max(skips) + 1} updates)"
-            result.note(
-                draft.node.at("skip_updates"), f"{draft.name}.skip_updates", reason, partly=True
-            )
     config: dict[str, Any] = {
         "id": identifier(name),
         "name": name.replace("_", " ").capitalize(),

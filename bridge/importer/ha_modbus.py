@@ -5,8 +5,9 @@
 ``homeassistant: packages:``), a package file, a bare list of hubs or one hub. Each hub
 becomes a bus, each (hub, unit) a device with its own mapping; sensors, binary sensors and
 switches are converted (``ha_entity``), fans and lights as switches (their entity ids
-change platform), climates and covers are noted. ``scan_interval`` picks the device's
-``fast`` (the shortest) and ``slow`` (the longest) poll, ``0`` reads once.
+change platform), climates and covers are noted. Every ``scan_interval`` is kept: the
+shortest is the device's ``fast`` poll, the longest its ``slow``, any other the entity's
+own ``poll`` in seconds; ``0`` reads once.
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from bridge.core.entity import MAX_INTERVAL
 from bridge.importer import ha_entity
-from bridge.importer.draft import Draft, mapping_document, validated, whole
+from bridge.importer.draft import Draft, entity_poll, mapping_document, validated, whole
 from bridge.importer.naming import identifier, unique_key
 from bridge.importer.result import MAX_ENTITIES, Import, ImportedDevice
 from bridge.importer.source import Node, Unresolved, Where
@@ -291,15 +293,11 @@ def _poll(drafts: list[Draft]) -> tuple[int, int]:
 
 
 def _entity(draft: Draft, fast: int, slow: int, result: Import) -> dict[str, Any] | None:
-    """The entity's fields with its poll class, validated (``draft.validated``)."""
-    interval = draft.scan_interval
-    nearer_fast = interval * interval <= fast * slow  # nearer on a log scale
-    poll = "once" if interval == 0 else "fast" if nearer_fast else "slow"
-    if interval not in (0, fast, slow):
-        result.note(
-            draft.node.at("scan_interval"),
-            f"{draft.name}.scan_interval",
-            f"{interval} s: read with the device's {poll} poll ({fast if nearer_fast else slow} s)",
-            partly=True,
-        )
+    """The entity's fields with its poll (its scan interval exactly), validated
+    (``draft.validated``)."""
+    poll = entity_poll(draft.scan_interval, {0: "once", fast: "fast", slow: "slow"})
+    if not isinstance(poll, str) and draft.scan_interval > MAX_INTERVAL:
+        reason = f"{draft.scan_interval} s: read every 31 days, the longest poll interval"
+        where = draft.node.at("scan_interval")
+        result.note(where, f"{draft.name}.scan_interval", reason, partly=True)
     return validated(draft, draft.fields | {"poll": poll, "ha": draft.ha}, result)

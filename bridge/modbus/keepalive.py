@@ -3,9 +3,9 @@ the poll loop of a device whose mapping declares ``protocol.keepalive``.
 
 While the device is online, a read at ``Priority.KEEPALIVE`` (after writes, before reads on
 request, commissioning and polls) goes out once it has been silent for half its keepalive
-interval: its first poll block, whose values are published like a poll's. The log says
-once when the device went longer than the interval without an answer (its watchdog may
-stop the motor) and once when it answers again.
+interval: the first block of its shortest poll interval, whose values are published like a
+poll's. The log says once when the device went longer than the interval without an answer
+(its watchdog may stop the motor) and once when it answers again.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import logging
 import time
 
 from bridge.core.device_state import DeviceState
-from bridge.core.entity import PollClass
 from bridge.core.planner import Address
+from bridge.core.schedule import ONCE
 from bridge.modbus.device_link import Changes, DeviceLink
 from bridge.modbus.scheduler import Priority
 
@@ -71,10 +71,11 @@ def _report_lapse(link: DeviceLink, now: float) -> None:
 
 
 async def _read_once(state: DeviceState, link: DeviceLink, on_change: Changes) -> bool:
-    """One keepalive read: the first block the fast polls read (its values decoded and
-    their changes passed on); False when there is no block to read (every entity polled
-    once, or refused)."""
-    plan = state.plan([PollClass.FAST]) or state.plan([PollClass.SLOW])
+    """One keepalive read: the first block of the shortest interval that has one (its
+    values decoded and their changes passed on); False when there is no block to read
+    (every entity polled once, or refused)."""
+    shortest = sorted({*state.intervals.values(), state.rule.fast, state.rule.slow} - {ONCE})
+    plan = next((p for p in map(state.plan, ([i] for i in shortest)) if p), ())
     if not plan:
         return False
     read = plan[0]

@@ -1,8 +1,9 @@
-"""One device: poll classes on a monotonic schedule, health and backoff, learnt refusals, writes.
+"""One device: poll intervals on a monotonic schedule, health and backoff, learnt refusals, writes.
 
-Poll: due classes -> precomputed plan -> scheduler (serialised, gap) -> register image ->
-decode what was read fresh -> ``on_update`` with the values that changed. Missed ticks are
-skipped, not queued. An offline device is probed once per backoff interval only.
+Poll: the intervals due (bridge/core/schedule.py) -> their plan, as one set -> scheduler
+(serialised, gap) -> register image -> decode what was read fresh (and what was read
+along) -> ``on_update`` with the values that changed. Missed ticks are skipped, not
+queued. An offline device is probed once per backoff interval only.
 
 The poller wires small parts, each given what the device knows (``DeviceState``,
 bridge/core/device_state.py: image, values, refusals, read limits, plans) and how it talks
@@ -35,6 +36,7 @@ from bridge.core.mapping import Mapping, Point
 from bridge.core.planner import Address, ReadLimits
 from bridge.core.protocol import Protocol
 from bridge.core.request import Read
+from bridge.core.schedule import ONCE, PollRule, PollSpec, Schedule
 from bridge.core.timing import LinkTiming
 from bridge.modbus.device_link import DeviceLink, Refused
 from bridge.modbus.keepalive import keep_alive
@@ -83,6 +85,7 @@ class DevicePoller:
             recheck=policy.refusal_recheck,
             guard=guard,  # what earlier mappings guarded
             confirm=device.counter_confirm,
+            poll=_poll_rule(mapping, device),
         )
         self.link = DeviceLink(
             device,
@@ -159,11 +162,8 @@ class DevicePoller:
 
     @property
     def intervals(self) -> dict[PollClass, float]:
-        fast, slow = self.device.poll.fast, self.device.poll.slow
-        keepalive = self.protocol.keepalive
-        if keepalive is not None:
-            fast = min(fast, keepalive.interval)
-        return {PollClass.FAST: fast, PollClass.SLOW: slow}
+        """The device's named intervals (``fast`` shortened by a keepalive)."""
+        return {PollClass.FAST: self.state.rule.fast, PollClass.SLOW: self.state.rule.slow}
 
     async def run(self) -> None:
         """Poll until cancelled (and feed the device's watchdog, bridge/modbus/keepalive.py);
@@ -176,28 +176,30 @@ class DevicePoller:
                 )
             await self._poll_loop()
 
-    def plan_of(self, poll_class: PollClass) -> tuple[Read, ...]:
-        """The reads of one poll class, as planned now."""
-        return self.state.plan([poll_class])
+    def plan_of(self, poll: PollSpec) -> tuple[Read, ...]:
+        """The reads of one interval (``fast``, ``slow``, ``once`` or seconds), as planned now."""
+        return self.state.plan([poll])
+
+    def _schedule(self) -> Schedule:
+        """Every interval in use (and the named ones: an empty class ticks as before),
+        due now."""
+        return Schedule.of(self._every_interval(), time.monotonic())
 
     async def _poll_loop(self) -> None:
-        next_due = dict.fromkeys((PollClass.FAST, PollClass.SLOW, PollClass.ONCE), 0.0)
+        schedule = self._schedule()
         while True:
             now = time.monotonic()
             if not self.health.may_poll(now):
                 await asyncio.sleep(self.health.next_attempt - now)
                 continue
-            due = [c for c, at in next_due.items() if at <= now]
+            due = schedule.due(now)
             if due:
                 await self.poll(due)
                 after = time.monotonic()
-                for poll_class in due:
-                    next_due[poll_class] = _next_tick(
-                        next_due[poll_class], self.intervals.get(poll_class), after
-                    )
-                if PollClass.ONCE in due and not self._polled_once:
-                    next_due[PollClass.ONCE] = after + self.device.poll.slow  # until it succeeds
-            wake = min(*next_due.values(), self._offline_wake())
+                schedule.served(due, after)
+                if ONCE in due and not self._polled_once:
+                    schedule.retry(ONCE, after + self.device.poll.slow)  # until it succeeds
+            wake = min(schedule.wake(), self._offline_wake())
             await asyncio.sleep(max(0.0, wake - time.monotonic()))
 
     @property
@@ -222,21 +224,26 @@ class DevicePoller:
     def _offline_wake(self) -> float:
         return self.health.next_attempt if self.health.online is False else float("inf")
 
-    async def poll(self, classes: Iterable[PollClass]) -> None:
-        """Read every point of these classes once and pass on what changed."""
-        chosen = set(classes)
+    async def poll(self, due: Iterable[PollSpec]) -> None:
+        """Read every point of these intervals once, in one plan, and pass on what
+        changed (with the values read along in the plan's holes)."""
+        chosen = frozenset(map(self.state.rule.seconds, due))
         self.learner.recheck()
         fresh: set[Address] = set()
         plan = self.state.plan(chosen)
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
-        if PollClass.ONCE in chosen and fresh:
+        if ONCE in chosen and fresh:
             self._polled_once = True
         keys = self.state.sharing(self.state.keys_of(chosen))  # and their registers' views
         await check_torn(self.state, self.link, keys, plan, fresh)
         self._decode(keys, fresh)
-        if not self.first_poll_done and set(PollClass) <= chosen:
+        if not self.first_poll_done and self._every_interval() <= chosen:
             self.first_poll_done = True  # units and limits read (or not there): say so once
             self._notify(frozenset())
+
+    def _every_interval(self) -> frozenset[float]:
+        named = (PollClass.FAST, PollClass.SLOW, PollClass.ONCE)
+        return frozenset({*self.state.intervals.values(), *map(self.state.rule.seconds, named)})
 
     async def read_now(self, keys: Iterable[str] | None = None) -> dict[str, Value]:
         """Read these points (all when None) ahead of the polls; return their values."""
@@ -362,12 +369,11 @@ class DevicePoller:
             )
 
 
-def _next_tick(due: float, interval: float | None, now: float) -> float:
-    """The next tick of a fixed schedule after ``now``; ticks missed meanwhile are skipped."""
-    if not interval:
-        return float("inf")
-    missed = max(0, int((now - due) // interval))
-    return due + (missed + 1) * interval
+def _poll_rule(mapping: Mapping, device: DeviceConfig) -> PollRule:
+    """The device's poll config as a rule; its ``fast`` no longer than a keepalive asks."""
+    keepalive = mapping.protocol.keepalive
+    fast = device.poll.fast if keepalive is None else min(device.poll.fast, keepalive.interval)
+    return device.poll.rule(fast)
 
 
 def _with_overrides(mapping: Mapping, device: DeviceConfig) -> Mapping:

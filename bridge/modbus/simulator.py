@@ -60,7 +60,7 @@ from bridge.core.address import to_wire
 from bridge.core.codec import Value, decode
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping, Point
-from bridge.core.request import Write
+from bridge.core.request import Read, Write
 from bridge.core.simulation import (
     Cell,
     Mover,
@@ -152,6 +152,7 @@ class _Device:
         spec: SimulatedUnit,
         record: Callable[[int, Write, float], None],
         react: Callable[[int, Write], dict[Cell, int]],
+        read_log: int,
     ) -> None:
         self.unit = spec.unit
         self.mapping = spec.mapping
@@ -164,6 +165,7 @@ class _Device:
         self.rules = build_rules(spec.mapping, self.points, spec.quirks)
         self.record = record
         self.react = react
+        self.reads: deque[tuple[Read, float]] = deque(maxlen=read_log)  # answered, with when
         self.unlocked = False  # Quirks.password: the right password was written
         self.misreads: list[dict[Cell, int]] = []  # answers the next reads get (counter faults)
         self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)  # the simulator's, shared
@@ -219,6 +221,7 @@ class _Device:
             if code is None:
                 self._fill(table, start, address, count, registers)
                 self._count_on_read(table, address, count)
+                self.reads.append((Read(table, address, size), received))
         else:
             write = Write(function_code, table, address, tuple(int(v) for v in values))
             self.record(self.unit, write, received)
@@ -322,15 +325,24 @@ class Simulator:
     lists the latest requests live units received, reads and writes, as ``(unit, function
     code, address)``: the order a bus served its devices in. Each of ``reactions``, called
     with ``(unit, Write)`` once a unit stored an accepted write, answers the other cells
-    that write changes (``{(Table.HOLDING, 8465): 1}``)."""
+    that write changes (``{(Table.HOLDING, 8465): 1}``). With ``read_log``, each unit keeps
+    its last that many answered reads with when they arrived (``reads``): what polls are
+    counted and timed by."""
 
-    def __init__(self, units: Sequence[SimulatedUnit], *, seed: int = 0, tick: float = 1.0) -> None:
+    def __init__(
+        self,
+        units: Sequence[SimulatedUnit],
+        *,
+        seed: int = 0,
+        tick: float = 1.0,
+        read_log: int = 0,
+    ) -> None:
         self.writes: list[tuple[int, Write]] = []
         self.write_times: list[float] = []
         self.reactions: list[Callable[[int, Write], dict[Cell, int]]] = []
         self.ready = asyncio.Event()
         self._devices = {
-            spec.unit: _Device(spec, self._record_write, self._react) for spec in units
+            spec.unit: _Device(spec, self._record_write, self._react, read_log) for spec in units
         }
         self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)
         for device in self._devices.values():
@@ -361,6 +373,11 @@ class Simulator:
 
     def image(self, unit: int) -> dict[Cell, int]:
         return dict(self._device(unit).image)
+
+    def reads(self, unit: int) -> list[tuple[Read, float]]:
+        """The reads the unit answered (the last ``read_log``), each with when it arrived
+        (``time.monotonic()``): what a test or bench counts polls by."""
+        return list(self._device(unit).reads)
 
     def value(self, unit: int, key: str) -> Value:
         device = self._device(unit)

@@ -213,3 +213,29 @@ sensor:
     inline = [(n.where.line, n.key, n.partly) for n in result.notes if "inside" in n.reason]
     assert inline == [(7, "sdm.sensors", False), (9, "sdm.switch", False)]
     assert "- platform: modbus_controller" in result.notes[-1].reason
+
+
+def test_skip_updates_is_kept_exactly_as_each_entitys_interval(tmp_path: Path) -> None:
+    path = tmp_path / "node.yaml"
+    path.write_text(
+        """\
+esphome: {name: meter}
+uart: {baud_rate: 9600}
+modbus: {id: bus}
+modbus_controller: [{id: sdm, address: 2, update_interval: 5s}]
+sensor:
+  - {platform: modbus_controller, name: Power, address: 1, register_type: read}
+  - {platform: modbus_controller, name: Voltage, address: 2, register_type: read, skip_updates: 11}
+  - {platform: modbus_controller, name: Energy, address: 3, register_type: read, skip_updates: 1}
+  - {platform: modbus_controller, name: Hours, address: 4, register_type: read, skip_updates: 119}
+"""
+    )
+    result = import_esphome(load_source(path), "node.yaml")
+    (device,) = result.devices
+    assert device.config["poll"] == {"fast": 5.0, "slow": 600.0}  # 5 s x (119 + 1)
+    polls = {key: entity["poll"] for key, entity in device.mapping["entities"].items()}
+    # every (skip_updates + 1)-th update of 5 s: 60 s and 10 s their own, exactly
+    assert polls == {"power": "fast", "voltage": 60.0, "energy": 10.0, "hours": "slow"}
+    assert not [n for n in result.notes if "skip_updates" in n.key]
+    points = Mapping.model_validate(device.mapping).points()
+    assert points["voltage"].entity.poll_spec == 60.0

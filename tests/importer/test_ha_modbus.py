@@ -198,7 +198,7 @@ def test_a_whole_configuration_becomes_buses_devices_and_mappings(tmp_path: Path
         "address": 30,
         "table": "holding",
         "bit": 0,
-        "poll": "fast",
+        "poll": 15,  # Home Assistant's default scan interval, kept exactly
         "ha": {"entity_id": "running"},
     }
     assert entities["export_limit"] == {
@@ -209,22 +209,16 @@ def test_a_whole_configuration_becomes_buses_devices_and_mappings(tmp_path: Path
         "write_function": 6,
         "access": "rw",
         "words": {"write_on": 1, "write_off": 0},  # 2 reads unknown, as Home Assistant's verify
-        "poll": "fast",
+        "poll": 15,
         "ha": {"entity_id": "export_limit", "component": "switch"},
     }
     relay = devices["solar_inverter_unit_4"].mapping["entities"]["relay"]
     assert (relay["table"], relay["access"], relay["write_function"]) == ("coil", "w", 5)
     mapping = Mapping.model_validate(inverter.mapping)
     assert mapping.points()["pv_power"].address == 10
-    # 15 s (the default) of the binary sensors is read with the fast poll (10 s)
-    assert [str(n) for n in result.notes] == [
-        "configuration.yaml:18: Fault.scan_interval: partly converted: 15 s: read with the "
-        "device's fast poll (10 s)",
-        "configuration.yaml:19: Running.scan_interval: partly converted: 15 s: read with the "
-        "device's fast poll (10 s)",
-        "configuration.yaml:21: Export limit.scan_interval: partly converted: 15 s: read with "
-        "the device's fast poll (10 s)",
-    ]
+    # 15 s (the default) between the device's fast (10 s) and slow (60 s): kept exactly
+    assert entities["fault"]["poll"] == 15
+    assert result.notes == []
 
 
 def test_every_key_left_out_is_reported_with_its_line(tmp_path: Path) -> None:
@@ -417,3 +411,32 @@ def test_an_entity_left_out_by_the_checks_across_entities_is_told_its_own_reason
     assert kept == {"grid_code", "mode_code"}
     assert set(reasons) == {"Grid signed", "Mode signed"}
     assert all(("'grid_code'" in r) != ("'mode_code'" in r) for r in reasons.values())
+
+
+def test_every_scan_interval_is_kept_exactly(tmp_path: Path) -> None:
+    sensors = [
+        {"slave": 1} | sensor
+        for sensor in [
+            {"name": "Power", "address": 1, "scan_interval": 10},
+            {"name": "Temperature", "address": 2, "scan_interval": 60},
+            {"name": "Energy", "address": 3, "scan_interval": 600},
+            {"name": "Serial", "address": 4, "scan_interval": 0},
+            {"name": "Lifetime", "address": 5, "scan_interval": 200000},
+            {"name": "Mode", "address": 6},
+        ]
+    ]
+    hub = {"name": "hub", "type": "tcp", "host": "127.0.0.1", "port": 502}
+    result = convert(tmp_path, yaml.safe_dump({"modbus": [hub | {"sensors": sensors}]}))
+    (device,) = result.devices
+    assert device.config["poll"] == {"fast": 10, "slow": 200000}
+    polls = {key: entity["poll"] for key, entity in device.mapping["entities"].items()}
+    assert polls == {
+        "power": "fast",
+        "temperature": 60,
+        "energy": 600,
+        "serial": "once",
+        "lifetime": "slow",  # the longest: the device's slow poll, over a day
+        "mode": 15,  # Home Assistant's default
+    }
+    assert result.notes == []
+    only_mapping(result)  # it validates

@@ -148,6 +148,25 @@ devices:
             ("mapping: t1.yaml", "mapping: soft_starter, counter_confirm: {current_run_time: 0}"),
             "devices.pump.counter_confirm.current_run_time: Input should be greater than or",
         ),
+        (  # issue 35: an entity's own interval, bounded, and only for keys of the mapping
+            (
+                "mapping: t1.yaml",
+                "mapping: soft_starter, poll: {entities: {current_run_time: 0.01}}",
+            ),
+            "devices.pump.poll.entities.current_run_time: a poll interval must be within 0.1 s",
+        ),
+        (
+            ("mapping: t1.yaml", "mapping: soft_starter, poll: {entities: {current_run: 2d}}"),
+            "devices.pump.poll.entities.current_run: poll must be fast, slow, once or an interval",
+        ),
+        (
+            ("mapping: t1.yaml", "mapping: soft_starter, poll: {entities: {runtime: 10s}}"),
+            "devices.pump.poll.entities.runtime: no entity of",
+        ),
+        (
+            ("mapping: t1.yaml", "mapping: soft_starter, poll: {entities: {'grid_*': 5}}"),
+            "devices.pump.poll.entities.grid_*: no entity of",
+        ),
         (("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, parity: X"), "buses.rs485.rtu.parity"),
         (  # a serial unit is one device: no unit to open for raw writes
             ("port: /dev/ttyUSB0", "port: /dev/ttyUSB0, raw_units: [5]"),

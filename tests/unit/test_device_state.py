@@ -39,9 +39,17 @@ def test_a_poll_class_is_planned_once_and_its_reads_kept() -> None:
     device = state()
     plan = device.plan([PollClass.FAST])
     assert plan == (Read(H, 0, 4),)  # wire addresses: printed minus one
-    assert device.plan([PollClass.FAST]) is not plan  # a new tuple of the same reads
-    assert device.plan([PollClass.FAST]) == plan
-    assert device.plan([PollClass.SLOW, PollClass.FAST]) == plan + device.plan([PollClass.SLOW])
+    assert device.plan([PollClass.FAST]) is plan  # planned once per set of due intervals
+    assert device.plan([2.0]) is plan  # fast is the default 2 s
+    both = device.plan([PollClass.SLOW, PollClass.FAST])  # one plan for the union
+    assert device.plan([PollClass.FAST, PollClass.SLOW]) is both
+    words = [(r.table, a) for r in both for a in r.span]
+    assert len(words) == len(set(words))  # no register read twice in one pass
+    assert {a for r in plan + device.plan([PollClass.SLOW]) for a in r.span} <= {
+        a for r in both for a in r.span
+    }
+    device.forget_plans()
+    assert device.plan([PollClass.FAST]) is not plan  # planned again when limits change
 
 
 def test_keep_puts_the_answer_in_the_image_and_in_fresh() -> None:

@@ -288,6 +288,12 @@ def test_expire_after_outlives_two_state_refreshes(entity: dict[str, Any], expir
     assert refreshed["expire_after"] == {602: 121, 660: 150}[expire]
 
 
+def test_expire_after_of_an_entitys_own_interval() -> None:
+    """Issue 35: an interval of its own (the mapping's, or as the device config resolved it)."""
+    assert (_one({"poll": "10m"}) or {})["expire_after"] == 1200  # 2 * 300 + 600
+    assert (_one({}, intervals={"value": 30.0}) or {})["expire_after"] == 630
+
+
 def test_entity_category_and_enabled_by_default() -> None:
     diagnostic = _one({"ha": {"entity_category": "diagnostic"}})
     assert diagnostic is not None
