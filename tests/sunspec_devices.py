@@ -99,6 +99,28 @@ def expected_values(image: dict[str, Any]) -> list[dict[str, Any]]:
     return found
 
 
+def mismatches(given: Any, read: Any, path: str = "") -> list[str]:
+    """Where a value the image gives differs from what was read back: every non-null
+    value of a point the definition has (pysunspec2's own test images carry a few keys of
+    older model revisions, such as 701's ``VL3N``; no definition places them)."""
+    if isinstance(given, dict) and isinstance(read, dict):
+        return [
+            found
+            for key, value in given.items()
+            if key in read
+            for found in mismatches(value, read[key], f"{path}/{key}")
+        ]
+    if isinstance(given, list) and isinstance(read, list) and len(given) == len(read):
+        return [
+            m
+            for i, (g, r) in enumerate(zip(given, read, strict=True))
+            for m in mismatches(g, r, f"{path}/{i}")
+        ]
+    if given is None or given == read:
+        return []
+    return [f"{path}: image {given!r}, read {read!r}"]
+
+
 def comparable(values: dict[str, Any]) -> dict[str, Any]:
     """A model's values without pysunspec2's bookkeeping (its ids, errors)."""
     return {k: v for k, v in values.items() if k not in {"mid", "error", "model_id"}}
