@@ -14,13 +14,15 @@ expanded the way pysunspec2 expands them (sunspec2/device.py ``Group.__init__`` 
 ``_init_repeating_group``): a count is a number, or the top-level point it names, and a
 count of 0 means "as many as the model's length holds" (legacy models such as 160, 64xxx).
 Model 1 of length 65 (an old common model) has no ``Pad``, as pysunspec2 allows.
+``scale_factor(placed, points)`` finds the point that scales a placed point as pysunspec2
+does (``Point.get_value``): in the point's own group instance, else at the model's top.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from typing import Any, Literal, get_args
@@ -121,6 +123,11 @@ class ModelDef:
         total = _fixed(self.group)
         return None if total is None else total - HEADER
 
+    @property
+    def count_points(self) -> tuple[str, ...]:
+        """The top-level points whose values ``layout`` needs (they count groups)."""
+        return tuple(sorted(_count_points(self.group)))
+
 
 @dataclass(frozen=True, slots=True)
 class PlacedPoint:
@@ -176,6 +183,20 @@ def layout(
     return placed
 
 
+def scale_factor(placed: PlacedPoint, points: Sequence[PlacedPoint]) -> PlacedPoint | int | None:
+    """What scales ``placed`` among ``points`` (one model's ``layout``): its sunssf point
+    (in its own group instance, else at the model's top), a fixed exponent, or None.
+    ModelDefinitionError when the named point is in neither."""
+    sf = placed.point.sf
+    if sf is None or isinstance(sf, int):
+        return sf
+    for path in (placed.path, ()):
+        for other in points:
+            if other.path == path and other.point.name == sf:
+                return other
+    raise ModelDefinitionError(f"point {placed.point.name}: scale factor {sf} is not placed")
+
+
 @dataclass(frozen=True, slots=True)
 class _Sizing:
     model: ModelDef
@@ -215,6 +236,13 @@ def _place(
             placed.extend(inner)
             at = inner[-1].offset + inner[-1].point.size if inner else at
     return tuple(placed)
+
+
+def _count_points(group: GroupDef) -> set[str]:
+    names = {group.count} if isinstance(group.count, str) else set()
+    for child in group.groups:
+        names |= _count_points(child)
+    return names
 
 
 def _fixed(group: GroupDef) -> int | None:

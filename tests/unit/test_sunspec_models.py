@@ -17,6 +17,7 @@ from bridge.sunspec.models import (
     layout,
     load_model,
     model_ids,
+    scale_factor,
 )
 
 IDS = model_ids()
@@ -138,3 +139,45 @@ def test_points_keep_their_definition() -> None:
 def test_an_unknown_model_is_a_clear_error() -> None:
     with pytest.raises(ModelDefinitionError, match="model 4242"):
         load_model(4242)
+
+
+def reference_scale_factors(group: Any, model: Any) -> list[Any]:
+    """(point offset, its scale factor's offset or exponent) as pysunspec2 resolves them
+    (Point.get_value: the point's group first, then the model's top)."""
+    found = []
+    for p in group.points.values():
+        if p.sf is not None:
+            sf = group.points.get(p.sf) or model.points.get(p.sf)
+            found.append((p.offset, sf.offset))
+        elif p.sf_value is not None:
+            found.append((p.offset, p.sf_value))
+    for sub in group.groups.values():
+        for g in sub if isinstance(sub, list) else [sub]:
+            found += reference_scale_factors(g, model)
+    return found
+
+
+@pytest.mark.parametrize("model_id", IDS)
+def test_scale_factors_resolve_as_pysunspec2_resolves_them(model_id: int) -> None:
+    model = load_model(model_id)
+    counts = dict.fromkeys(model.count_points, 2)
+    assert set(model.count_points) == count_points(model.group)
+    legacy = legacy_groups(model.group)
+    length = model.group.points_length - HEADER + 2 * sum(g.points_length for g in legacy)
+    reference = ss_device.Model(model_id=model_id, model_len=length if legacy else 0, data=counts)
+    placed = layout(model, reference.len - HEADER, counts)
+    ours_sf = []
+    for p in placed:
+        sf = scale_factor(p, placed)
+        if sf is not None:
+            ours_sf.append((p.offset, sf if isinstance(sf, int) else sf.offset))
+            assert isinstance(sf, int) or sf.point.type == "sunssf"
+    assert ours_sf == reference_scale_factors(reference, reference)
+
+
+def test_a_scale_factor_that_is_not_placed_is_an_error() -> None:
+    placed = layout(load_model(103), 50)
+    watts = next(p for p in placed if p.point.name == "W")
+    assert scale_factor(watts, placed) == next(p for p in placed if p.point.name == "W_SF")
+    with pytest.raises(ModelDefinitionError, match="scale factor W_SF is not placed"):
+        scale_factor(watts, [watts])
