@@ -9,14 +9,20 @@ answer (then the walk stops: a silent unit costs one timeout, not three).
 
 Requests: one per base tried (the marker, the first model's ID and L in one read), then
 one per model (the next ID and L; the common model's body is read with the next ID and L
-when they fit the read limit). The walk refuses what a device cannot mean: a chain that
-runs past register 65535 (addresses only grow, so that is also the only way a chain can
-loop), more than ``max_models`` models or ``max_registers`` registers, a model ID of 0,
-an answer shorter than asked.
+when they fit the read limit), so at most ``len(bases) + max_models + 2 +
+ceil(66 / read_limit)`` (``request_bound``; the 2: an end marker whose L is refused, read
+again alone, and the common model's body). Of a common model longer than its definition
+only the definition's 66 registers are read.
+
+The walk refuses what a device cannot mean: a chain that runs past register 65535
+(addresses only grow, so that is also the only way a chain can loop), more than
+``max_models`` models or ``max_registers`` registers, a model ID of 0, an answer shorter
+than asked.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 
@@ -29,6 +35,7 @@ MARKER = (0x5375, 0x6E53)  # "SunS"
 END = 0xFFFF  # the ID that ends the chain
 COMMON = 1  # the common model: manufacturer, model, serial number
 _SPACE = 0x10000  # holding registers 0..65535
+_COMMON_LENGTH = 66  # model 1's L by its definition (tests check it against models.py)
 _STRINGS = frozenset({"Mn", "Md", "Opt", "Vr", "SN"})  # the common model's strings
 
 
@@ -83,6 +90,12 @@ class Chain:
     @property
     def model_ids(self) -> tuple[int, ...]:
         return tuple(m.id for m in self.models)
+
+
+def request_bound(bases: Sequence[int] = BASES, limits: WalkLimits | None = None) -> int:
+    """The most requests a walk makes, whatever the device answers."""
+    limits = limits or WalkLimits()
+    return len(bases) + limits.max_models + 2 + math.ceil(_COMMON_LENGTH / limits.read_limit)
 
 
 async def walk(read: Read, bases: Sequence[int] = BASES, limits: WalkLimits | None = None) -> Chain:
@@ -144,9 +157,11 @@ async def _follow(
         models.append(model)
         tail = _SPACE - model.end  # registers left after the model
         if model.id == COMMON and common is None:
-            with_next = model.length + HEADER <= counted.limit and tail >= HEADER
-            body = await counted.span(address + HEADER, model.length + (HEADER if with_next else 0))
-            common = _common(body[: model.length], model.length)
+            wanted = min(model.length, _COMMON_LENGTH)  # the points the definition has
+            with_next = wanted == model.length and wanted + HEADER <= counted.limit
+            with_next = with_next and tail >= HEADER
+            body = await counted.span(address + HEADER, wanted + (HEADER if with_next else 0))
+            common = _common(body[:wanted], wanted)
             if with_next:
                 header, address = (body[-2], body[-1]), model.end
                 continue

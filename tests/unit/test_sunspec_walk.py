@@ -20,7 +20,17 @@ from bridge.errors import (
     SunSpecChainError,
 )
 from bridge.sunspec.image import DeviceImageError, build_image
-from bridge.sunspec.walk import END, MARKER, Chain, ChainModel, WalkLimits, text, walk
+from bridge.sunspec.models import load_model
+from bridge.sunspec.walk import (
+    END,
+    MARKER,
+    Chain,
+    ChainModel,
+    WalkLimits,
+    request_bound,
+    text,
+    walk,
+)
 from tests.sunspec_devices import every_image
 
 
@@ -153,6 +163,18 @@ def test_the_common_model_s_unimplemented_points_read_unknown() -> None:
     assert (common.model, common.serial_number, common.device_address) == (None, None, None)
 
 
+def test_a_common_model_longer_than_its_definition_is_read_as_far_as_defined() -> None:
+    assert load_model(1).fixed_length == 66
+    registers = chain_registers(40000, [(1, 3000), (103, 50)])
+    registers[40002 + 50] = 0x5A00  # SN "Z"
+    bus = Registers(registers)
+    chain = run(bus)
+    assert chain.model_ids == (1, 103)
+    assert chain.common is not None
+    assert chain.common.serial_number == "Z"
+    assert bus.reads[:3] == [(40000, 4), (40004, 66), (43004, 2)]
+
+
 def test_a_legacy_common_model_of_65_registers_is_read() -> None:
     registers = chain_registers(40000, [(1, 65), (101, 50)])
     registers[40004 + 64] = 7
@@ -265,6 +287,32 @@ def test_any_chain_is_walked_exactly(base: int, models: list[tuple[int, int]], l
     chain = asyncio.run(walk(bus.read, limits=WalkLimits(read_limit=limit)))
     assert [(m.id, m.length) for m in chain.models] == models
     assert chain.requests == len(bus.reads) == [40000, 50000, 0].index(base) + 1 + len(models)
+    assert all(count <= limit for _, count in bus.reads)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    words=st.lists(st.integers(0, 0xFFFF), min_size=0, max_size=400),
+    limit=st.integers(4, 125),
+    max_models=st.integers(1, 20),
+    refused=st.sets(st.integers(0, 399), max_size=5),
+)
+def test_whatever_a_device_answers_the_requests_stay_bounded(
+    words: list[int], limit: int, max_models: int, refused: set[int]
+) -> None:
+    """Random registers behind a marker (some refused): the walk ends, with a chain or a
+    clear error, within its stated number of requests, each within the read limit."""
+    registers = {40000 + i: w for i, w in enumerate([*MARKER, *words]) if i - 2 not in refused}
+    bus = Registers(registers)
+    limits = WalkLimits(read_limit=limit, max_models=max_models)
+    try:
+        chain = asyncio.run(walk(bus.read, limits=limits))
+    except (NotSunSpecError, SunSpecChainError):
+        pass
+    else:
+        assert len(chain.models) <= max_models
+        assert chain.requests == len(bus.reads)
+    assert len(bus.reads) <= request_bound(limits=limits)
     assert all(count <= limit for _, count in bus.reads)
 
 
