@@ -60,6 +60,15 @@ def reader(submit: Submit, unit: int) -> Callable[[int, int], Any]:
     return read
 
 
+def in_memory(registers: dict[int, int]) -> Callable[[int, int], Any]:
+    async def read(address: int, count: int) -> list[int]:
+        if not all(a in registers for a in range(address, address + count)):
+            raise DeviceExceptionError(2, "illegal data address", "fail")
+        return [registers[a] for a in range(address, address + count)]
+
+    return read
+
+
 def check_against_reference(chain: Chain, reference: Any, unit: int) -> None:
     """The walk's chain and common model are pysunspec2's; every model's values are the
     image's."""
@@ -147,6 +156,23 @@ async def test_over_rtu_on_a_pty_the_walk_and_pysunspec2_read_the_same_devices()
         for unit in PLACES:
             reference = await asyncio.to_thread(scan_rtu, port, unit)
             check_against_reference(chains[unit], reference, unit)
+
+
+@pytest.mark.asyncio
+async def test_over_rtu_over_tcp_the_walk_finds_what_it_finds_in_the_registers() -> None:
+    """pysunspec2 has no RTU over TCP: the reference is the walk of the same registers in
+    memory (tests/unit/test_sunspec_walk.py checks that one against pysunspec2's scan)."""
+    images = built()
+    sim = bus_simulator(images)
+    bus = TcpBus(id="t", transport="rtu-over-tcp", host="127.0.0.1", tcp_port=1, timeout=1.0)
+    async with (
+        serving_tcp(sim, "rtu") as port,
+        open_bus(bus.model_copy(update={"tcp_port": port})) as submit,
+    ):
+        chains = await walk_every_unit(sim, submit)
+    for unit, image in images.items():
+        assert chains[unit] == await walk(in_memory(image.registers))
+        assert chains[unit].base == PLACES[unit][1]
 
 
 @pytest.mark.asyncio
