@@ -2,11 +2,12 @@
 
 Source: the ``model_<id>.json`` files pysunspec2 ships (``sunspec2/models/json``), read
 through ``importlib.resources``, never copied. Why those: they are the SunSpec Alliance's
-own files (the same JSON as github.com/sunspec/models, vendored into the package by the
-Alliance at each release), so pinning pysunspec2 to one minor (pyproject.toml) pins the
-definitions, the tests can use pysunspec2 itself as the reference reader of the same
-files, and nothing is fetched at run time. The spreadsheets and SMDX XML of the models
-repository say the same in older formats.
+own files (``sunspec2/models`` is github.com/sunspec/models, a git submodule of the
+Alliance's pysunspec2, shipped in its wheel), so pinning pysunspec2 to one minor
+(pyproject.toml) pins the definitions, the tests can use pysunspec2 itself as the
+reference reader of the same files, and nothing is fetched at run time or copied into this
+repository. The spreadsheets and SMDX XML of the models repository say the same in older
+formats.
 
 ``load_model(id)`` returns a ``ModelDef``; ``layout(model, length, counts)`` places every
 point of one model instance at its offset from the model's ID register, repeating groups
