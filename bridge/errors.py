@@ -15,6 +15,10 @@
     │                           maps each to its reason; nothing of the command is written;
     │                           ``forbidden`` when any key's refusal was
     ├── CommandExpiredError     a command could not be sent before its expiry: dropped
+    ├── SunSpecError            a SunSpec walk found no chain it can use
+    │   ├── NotSunSpecError     no ``SunS`` marker at any base tried: not a SunSpec device
+    │   └── SunSpecChainError   the model chain is malformed (runs past 65535, too many
+    │                           models or registers, a short answer, a model id 0)
     └── ModbusError             a transaction did not succeed
         ├── BusError            the port or gateway is not reachable (unplugged, refused)
         ├── DeviceTimeoutError  the unit did not answer in time
@@ -121,6 +125,18 @@ class CommandExpiredError(BridgeError):
     def __init__(self, message: str, *, sent: bool = False) -> None:
         super().__init__(message)
         self.sent = sent
+
+
+class SunSpecError(BridgeError):
+    """A SunSpec walk found no model chain it can use."""
+
+
+class NotSunSpecError(SunSpecError):
+    """No ``SunS`` marker at any base address tried."""
+
+
+class SunSpecChainError(SunSpecError):
+    """The model chain is malformed or larger than the walk's bounds."""
 
 
 class ModbusError(BridgeError):

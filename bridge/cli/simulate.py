@@ -3,24 +3,29 @@
     modbus-mqtt-bridge simulate --mapping nastec_vasco --unit 1 \
         --mapping soft_starter --unit 2 --tcp 127.0.0.1:5020
     modbus-mqtt-bridge simulate --mapping p2_vfd --unit 1 --pty --framer ascii
+    modbus-mqtt-bridge simulate --sunspec 3=inverter.json@40000 --tcp 127.0.0.1:5020
 
 ``--pty`` creates a virtual serial cable and prints the port the bridge should open.
 Quirks (``--latency``, ``--dead``, ``--max-read``...) reproduce real devices' behaviour.
 The devices follow their commands; ``--fault KEY[=LABEL]`` starts them tripped;
 ``--counter-fault energy=tear@60`` makes a counter misread a minute after the start.
+``--sunspec UNIT=IMAGE.json[@BASE]`` serves a SunSpec device from a device image
+(pysunspec2's JSON: its models and point values), its marker at BASE (default 40000).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+from pathlib import Path
 from typing import TextIO
 
 from bridge.cli.lifecycle import until_stopped
 from bridge.core.mapping import Mapping, load_mapping, resolve_mapping_path
 from bridge.errors import InputError, ValueRejectedError
 from bridge.modbus.null_modem import null_modem
-from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
+from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator, SunSpecUnit
+from bridge.sunspec.image import DeviceImageError, load_image
 
 
 def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -28,17 +33,25 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     sim.add_argument(
         "--mapping",
         action="append",
-        required=True,
+        default=[],
         metavar="NAME",
         help="shipped mapping name or YAML path (repeat with --unit)",
     )
     sim.add_argument(
         "--unit",
         action="append",
-        required=True,
+        default=[],
         type=int,
         metavar="N",
         help="unit id of the preceding --mapping",
+    )
+    sim.add_argument(
+        "--sunspec",
+        action="append",
+        default=[],
+        metavar="UNIT=IMAGE[@BASE]",
+        help="a SunSpec device at UNIT from a device image (pysunspec2's JSON), its marker "
+        "at BASE (default 40000; repeatable)",
     )
     sim.add_argument(
         "-o",
@@ -124,6 +137,8 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
     """The simulator the arguments describe; InputError naming the bad argument."""
     if len(args.mapping) != len(args.unit):
         raise InputError("simulate", ["give one --unit after each --mapping"])
+    if not args.mapping and not args.sunspec:
+        raise InputError("simulate", ["give at least one --mapping (with --unit) or --sunspec"])
     options = dict(pair.partition("=")[::2] for pair in args.option)
     mappings = [load_mapping(resolve_mapping_path(ref)) for ref in args.mapping]
     problems = _option_problems(options, mappings)
@@ -144,12 +159,30 @@ def build_simulator(args: argparse.Namespace) -> Simulator:
         )
         units.append(SimulatedUnit(unit, mapping, mine, quirks))
     try:
-        simulator = Simulator(units, seed=args.seed, tick=args.tick)
+        simulator = Simulator(
+            [*units, *_sunspec_units(args.sunspec)], seed=args.seed, tick=args.tick
+        )
     except ValueError as exc:
         raise InputError("simulate", [str(exc)]) from None
     _trip(simulator, [(spec.unit, spec.mapping) for spec in units], args.fault)
     _counter_faults(simulator, units, args.counter_fault)
     return simulator
+
+
+def _sunspec_units(specs: list[str]) -> list[SunSpecUnit]:
+    """``--sunspec UNIT=IMAGE[@BASE]``: each image laid out (InputError names the bad one)."""
+    units, problems = [], []
+    for spec in specs:
+        unit, _, rest = spec.partition("=")
+        path, _, base = rest.partition("@")
+        try:
+            units.append(SunSpecUnit(int(unit), load_image(Path(path), int(base or 40000))))
+        except ValueError as exc:  # DeviceImageError too
+            reason = exc if isinstance(exc, DeviceImageError) else "UNIT and BASE are numbers"
+            problems.append(f"--sunspec {spec}: {reason}")
+    if problems:
+        raise InputError("simulate", problems)
+    return units
 
 
 def _counter_faults(simulator: Simulator, units: list[SimulatedUnit], specs: list[str]) -> None:
@@ -214,7 +247,11 @@ def run_simulate(args: argparse.Namespace, out: TextIO) -> int:
 
 
 async def _serve(simulator: Simulator, args: argparse.Namespace, out: TextIO) -> None:
-    units = ", ".join(f"{m} unit {u}" for m, u in zip(args.mapping, args.unit, strict=True))
+    served = [f"{m} unit {u}" for m, u in zip(args.mapping, args.unit, strict=True)]
+    served += [
+        f"sunspec {spec.partition('=')[2]} unit {spec.partition('=')[0]}" for spec in args.sunspec
+    ]
+    units = ", ".join(served)
     if args.tcp:
         host, _, port = args.tcp.rpartition(":")
         task = asyncio.create_task(

@@ -32,7 +32,10 @@ before calling the hook (simruntime.py:62-66), which would skip latency and quir
 * counter faults (``counter_fault``, ``schedule``): the next reads of a counter answer
   what ``bridge/core/simulation_counter.py`` says instead of the image.
 
-One module, about 520 lines, on purpose: it is the one place that reaches into pymodbus'
+A ``SunSpecUnit`` (bridge/modbus/sunspec_unit.py) serves a SunSpec device image beside
+the mapping units: FC03 within the image, 02 outside it.
+
+One module, about 530 lines, on purpose: it is the one place that reaches into pymodbus'
 server (its hooks, its SimDevice, its context variable), and every part of it is one of
 those hooks or what they call; the decisions themselves are in bridge/core.
 """
@@ -90,8 +93,9 @@ from bridge.core.simulation_counter import (
     fault_reads,
 )
 from bridge.modbus.frame import CoilWordRequest
+from bridge.modbus.sunspec_unit import ImageDevice, SunSpecUnit
 
-__all__ = ["Quirks", "SimulatedUnit", "Simulator", "two_byte_count_frame"]
+__all__ = ["Quirks", "SimulatedUnit", "Simulator", "SunSpecUnit", "two_byte_count_frame"]
 
 _TABLES = {1: Table.COIL, 5: Table.COIL, 15: Table.COIL, 2: Table.DISCRETE, 4: Table.INPUT}
 _BIT_SPACE = 4096  # coils/discrete inputs 0..4095 exist; above, pymodbus answers 02 itself
@@ -327,11 +331,11 @@ class Simulator:
     with ``(unit, Write)`` once a unit stored an accepted write, answers the other cells
     that write changes (``{(Table.HOLDING, 8465): 1}``). With ``read_log``, each unit keeps
     its last that many answered reads with when they arrived (``reads``): what polls are
-    counted and timed by."""
+    counted and timed by. ``SunSpecUnit``s serve device images beside the mapping units."""
 
     def __init__(
         self,
-        units: Sequence[SimulatedUnit],
+        units: Sequence[SimulatedUnit | SunSpecUnit],
         *,
         seed: int = 0,
         tick: float = 1.0,
@@ -342,9 +346,16 @@ class Simulator:
         self.reactions: list[Callable[[int, Write], dict[Cell, int]]] = []
         self.ready = asyncio.Event()
         self._devices = {
-            spec.unit: _Device(spec, self._record_write, self._react, read_log) for spec in units
+            spec.unit: _Device(spec, self._record_write, self._react, read_log)
+            for spec in units
+            if isinstance(spec, SimulatedUnit)
         }
         self.requests: deque[Request] = deque(maxlen=REQUESTS_KEPT)
+        self._images = {
+            spec.unit: ImageDevice(spec, self.requests)
+            for spec in units
+            if isinstance(spec, SunSpecUnit)
+        }
         for device in self._devices.values():
             device.requests = self.requests
         self._rng = random.Random(seed)  # noqa: S311 - simulated readings, not secrets
@@ -352,12 +363,13 @@ class Simulator:
         self._port: int | None = None
         self._moving = False
         self._scheduled: list[tuple[float, list[tuple[int, str, str]]]] = []
-        if len(self._devices) != len(units):
+        if len(self._devices.keys() | self._images.keys()) != len(units):
             raise ValueError("unit ids must be unique")
         for spec in units:
             if not 0 <= spec.unit <= 255:
                 raise ValueError(f"unit {spec.unit} is outside 0..255 (0: any unit id)")
-            _check_quirks(spec.quirks)
+            if isinstance(spec, SimulatedUnit):
+                _check_quirks(spec.quirks)
 
     @property
     def port(self) -> int:
@@ -481,12 +493,16 @@ class Simulator:
         )
         await self._serve(server, port)
 
-    def _answering(self, unit: int) -> _Device | None:
+    def _answering(self, unit: int) -> _Device | ImageDevice | None:
         """The simulated device that takes a request to ``unit``: its own, else unit 0."""
-        return self._devices.get(unit) or self._devices.get(0)
+        return next(
+            (d for d in (self._devices.get(unit), self._images.get(unit)) if d is not None),
+            self._devices.get(0) or self._images.get(0),
+        )
 
     def _sim_devices(self) -> list[SimDevice]:
-        return [device.sim_device() for device in self._devices.values()]
+        images = [device.sim_device() for device in self._images.values()]
+        return [device.sim_device() for device in self._devices.values()] + images
 
     def _hooks(self, framer: str) -> dict[str, Any]:
         def trace_pdu(sending: bool, pdu: ModbusPDU) -> ModbusPDU | None:
