@@ -1,0 +1,187 @@
+"""A mapping built from a walked SunSpec device: one entity per implemented point.
+
+``build_mapping(chain, registers)`` returns a ``BuiltMapping``: the mapping document (the
+dict a mapping YAML file holds, validated by ``bridge.core.mapping.Mapping``), what each
+entity reads (``sources``) and the points left out with the reason (``skipped``). It is
+pure: ``registers`` (wire address -> word, what the caller has read of the device) gives
+the values a layout needs (the count points of the 7xx curves) and the module names
+(model 160's ``IDStr``); without them a model whose layout depends on a count is left
+out, and repeating groups are named by their index.
+
+Per point type (``entities``): numbers as ``s16``/``u16``/``s32``/``u32``/``s64``/
+``u64``/``f32``/``f64``; ``acc16/32/64`` as ``u16/u32/u64`` counters
+(``total_increasing``); ``enum16/32`` as enums of the model's symbols; ``bitfield16/32``
+as the raw word (diagnostic) and one boolean per symbol (an alarm for the event and
+alarm words); ``string`` as ``ascii``; ``sunssf`` as a diagnostic ``s16`` that the points
+it scales name in ``scale_by``; ``ipaddr`` as a diagnostic ``u32``; ``pad``, ``eui48`` and
+``ipv6addr`` left out. "Not implemented" values are sentinels. Addresses are the wire
+addresses the walk read (offset 0).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping as AnyMapping
+from dataclasses import dataclass, field
+from importlib import metadata
+from typing import Any
+
+from bridge.core.mapping import Mapping
+from bridge.sunspec.entities import ModelContext, Source, point_entities
+from bridge.sunspec.models import (
+    HEADER,
+    GroupDef,
+    ModelDef,
+    ModelDefinitionError,
+    layout,
+    load_model,
+)
+from bridge.sunspec.naming import snake
+from bridge.sunspec.walk import Chain, ChainModel, text
+
+STATUS_POINTS = ("St", "State")  # an inverter's or a battery's operating state
+
+
+@dataclass(frozen=True, slots=True)
+class Skipped:
+    """A point (or a whole model: ``point`` empty) left out of the mapping, and why."""
+
+    model: int
+    address: int
+    point: str
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class BuiltMapping:
+    """The mapping document, each entity's ``Source`` and what was left out."""
+
+    document: dict[str, Any]
+    sources: dict[str, Source]
+    skipped: tuple[Skipped, ...] = field(default=())
+
+    def mapping(self) -> Mapping:
+        """The document validated (pydantic's ValidationError if the builder erred)."""
+        return Mapping.model_validate(self.document)
+
+
+def build_mapping(
+    chain: Chain,
+    registers: AnyMapping[int, int] | None = None,
+    *,
+    read_limit: int = 125,
+) -> BuiltMapping:
+    """The mapping of a walked device (see the module's docstring)."""
+    words = registers or {}
+    entities: dict[str, dict[str, Any]] = {}
+    sources: dict[str, Source] = {}
+    skipped: list[Skipped] = []
+    seen: Counter[int] = Counter()
+    names: set[str] = set()
+    for index, model in enumerate(chain.models):
+        seen[model.id] += 1
+        try:
+            definition = load_model(model.id)
+            placed = layout(definition, model.length, _counts(definition, model, words))
+        except ModelDefinitionError as e:
+            skipped.append(Skipped(model.id, model.address, "", str(e)))
+            continue
+        prefix = snake(definition.name) + (f"_{seen[model.id]}" if seen[model.id] > 1 else "")
+        context = ModelContext(
+            index=index,
+            model=model,
+            definition=definition,
+            prefix=prefix,
+            placed=placed,
+            group_labels=_group_labels(definition.group),
+            ids=_module_ids(model, placed, words),
+            read_limit=read_limit,
+            names=names,
+        )
+        for point in placed:
+            built, reason = point_entities(context, point)
+            if reason:
+                where = "/".join(
+                    [*(f"{g}[{i}]" if i else g for g, i in point.path), point.point.name]
+                )
+                skipped.append(Skipped(model.id, model.address + point.offset, where, reason))
+            for key, (entity, source) in built.items():
+                entities[key] = entity
+                sources[key] = source
+    document = _header(chain, entities, read_limit)
+    status = next((k for k, s in sources.items() if _is_status(s, entities[k])), None)
+    if status is not None:
+        document["status"] = status
+    return BuiltMapping(document, sources, tuple(skipped))
+
+
+def _header(chain: Chain, entities: dict[str, dict[str, Any]], read_limit: int) -> dict[str, Any]:
+    common = chain.common
+    models = ", ".join(str(i) for i in chain.model_ids) or "none"
+    document: dict[str, Any] = {
+        "manufacturer": (common.manufacturer if common else None) or "Generic",
+        "model": (common.model if common else None) or "SunSpec device",
+        "description": f"A SunSpec device (models {models} from {chain.base}), its entities "
+        "built from the SunSpec model definitions",
+        "source": {
+            "title": "SunSpec information models (pysunspec2 "
+            f"{metadata.version('pysunspec2')} model JSON)",
+            "document": "bridge/sunspec/mapping.py",
+        },
+        "protocol": {
+            "addressing": {"offset": 0, "display": "dec"},
+            "function_codes": [3, 6, 16],
+            "max_read_registers": read_limit,
+            "readable_gaps": True,
+            "transports": ["tcp", "rtu", "rtu-over-tcp"],
+        },
+        "entities": entities,
+    }
+    return document
+
+
+def _is_status(source: Source, entity: dict[str, Any]) -> bool:
+    """The device's status: the first operating state (a model's top-level enum St or
+    State: an inverter's, a battery's)."""
+    return "enum" in entity and not source.path and source.point in STATUS_POINTS
+
+
+def _counts(definition: ModelDef, model: ChainModel, words: AnyMapping[int, int]) -> dict[str, int]:
+    """The values of the top-level points that count a model's repeating groups."""
+    counts: dict[str, int] = {}
+    for name in definition.count_points:
+        address = model.address + definition.group.point(name).offset
+        if address not in words:
+            raise ModelDefinitionError(
+                f"SunSpec model {model.id} at {model.address}: its layout needs point {name} "
+                f"(register {address}) read"
+            )
+        counts[name] = words[address]
+    return counts
+
+
+def _group_labels(group: GroupDef) -> dict[str, str]:
+    labels = {group.name: group.label or group.name}
+    for child in group.groups:
+        labels |= _group_labels(child)
+    return labels
+
+
+def _module_ids(
+    model: ChainModel, placed: tuple[Any, ...], words: AnyMapping[int, int]
+) -> dict[tuple[tuple[str, int], ...], str]:
+    """A repeating group instance's own name, its ``IDStr`` (model 160's modules), where
+    the caller read it."""
+    ids: dict[tuple[tuple[str, int], ...], str] = {}
+    for p in placed:
+        if p.point.name != "IDStr" or not p.path or not p.path[-1][1]:
+            continue
+        span = range(model.address + p.offset, model.address + p.offset + p.point.size)
+        if all(a in words for a in span):
+            found = text([words[a] for a in span])
+            if found:
+                ids[p.path] = found
+    return ids
+
+
+__all__ = ["HEADER", "BuiltMapping", "Skipped", "Source", "build_mapping"]
