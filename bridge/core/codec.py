@@ -275,6 +275,19 @@ def scaled_decimals(entity: Entity, exponent: int) -> int:
     return max(_places(_factor(entity, exponent)), _places(Decimal(repr(entity.offset))))
 
 
+def decimals_of(point: Point, image: Image) -> int | None:
+    """The decimals ``point``'s value is published with: fixed by the mapping, or for a
+    ``scale_by`` value those of the exponent in ``image`` (None while it is unknown)."""
+    source = point.scale_source
+    if source is None:
+        return point.entity.decimals
+    try:
+        exponent = scale_exponent(source, image)
+    except MissingDataError:
+        exponent = None
+    return None if exponent is None else scaled_decimals(point.entity, exponent)
+
+
 def _places(number: Decimal) -> int:
     """Decimals ``number`` needs: 0.01 two, 100 none."""
     return max(0, -int(number.normalize().as_tuple().exponent))

@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from datetime import datetime
 
-from bridge.core.codec import Value, decode
+from bridge.core.codec import Value, decimals_of, decode
 from bridge.core.counters import Kind, Reading, counters_of
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Mapping, Point, printed_address
@@ -225,7 +225,7 @@ class DeviceState:
                     self.counter_news.append((key, reading))
                 if not reading.published:
                     continue  # held: the published value stays
-                value = _counted(point, value, reading)
+                value = _counted(value, reading, decimals_of(point, self.image))
             if key not in self.values or self.values[key] != value:
                 changed.add(key)
             self.values[key] = value
@@ -302,14 +302,15 @@ class DeviceState:
         )
 
 
-def _counted(point: Point, read: Value, reading: Reading) -> Value:
+def _counted(read: Value, reading: Reading, decimals: int | None) -> Value:
     """What a counter publishes: the value as decoded on a plain rise, else the counter's
-    value (a rollover's continuation, a reset) in the decoded value's type and decimals."""
+    value (a rollover's continuation, a reset) in the decoded value's type and decimals
+    (``decimals``: the point's, a ``scale_by`` value's at the exponent it was read with)."""
     if reading.kind in (Kind.FIRST, Kind.RISE) or reading.value is None:
         return read
     if isinstance(read, int) and float(reading.value).is_integer():
         return int(reading.value)
-    return round(reading.value, point.entity.decimals)
+    return reading.value if decimals is None else round(reading.value, decimals)
 
 
 def _is_time(text: object) -> bool:

@@ -9,7 +9,7 @@ from typing import Any
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bridge.core.codec import decode
+from bridge.core.codec import decimals_of, decode
 from bridge.core.counters import CounterRule
 from bridge.core.device_state import DeviceState
 from bridge.core.entity import PollClass, Table
@@ -267,3 +267,41 @@ def test_a_written_value_waits_for_its_read_back_with_the_exponent() -> None:
     device.store(Write(6, H, 0, (5,)))
     assert device.decode_fresh(["a"], {(H, 0), (H, 40)}) == frozenset()
     assert device.values["a"] == 12.34
+
+
+def test_a_scaled_counter_reset_keeps_the_decimals_of_its_exponent() -> None:
+    mapping = make_mapping(
+        {
+            "wh": {
+                "name": "Energy",
+                "address": 0,
+                "type": "u32",
+                "scale_by": "sf",
+                "ha": {"state_class": "total_increasing", "device_class": "energy"},
+                "unit": "kWh",
+            },
+            "sf": {"name": "Scale", "address": 2, "type": "s16"},
+        }
+    )
+    device = state(mapping)
+    for raw in (1234, 123, 123, 123):
+        fresh: set[tuple[Table, int]] = set()
+        device.keep(Read(H, 0, 3), (0, raw, 0xFFFE), fresh)
+        device.decode_fresh(["wh"], fresh)
+    assert device.values["wh"] == 1.23  # the reset, confirmed, with the exponent's decimals
+
+
+def test_the_decimals_shown_follow_the_exponent_read() -> None:
+    points = inverter().points()
+    assert decimals_of(points["a"], {(H, 40): 0xFFFD}) == 3
+    assert decimals_of(points["a"], {(H, 40): 2}) == 0
+    assert decimals_of(points["a"], {(H, 40): 0x8000}) is None
+    assert decimals_of(points["a"], {}) is None
+    assert decimals_of(points["mid"], {}) == 0
+    fixed = make_mapping(
+        {
+            "v": {"name": "V", "address": 0, "scale_by": "sf", "precision": 1},
+            "sf": {"name": "Scale", "address": 1, "type": "s16"},
+        }
+    )
+    assert decimals_of(fixed.points()["v"], {(H, 1): 0xFFFD}) == 1
