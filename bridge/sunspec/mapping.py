@@ -27,6 +27,7 @@ from importlib import metadata
 from typing import Any
 
 from bridge.core.mapping import Mapping
+from bridge.core.planner import limits_for, plan_reads
 from bridge.sunspec.entities import ModelContext, Source, point_entities
 from bridge.sunspec.models import (
     HEADER,
@@ -108,11 +109,27 @@ def build_mapping(
             for key, (entity, source) in built.items():
                 entities[key] = entity
                 sources[key] = source
+    for key in _unplannable(_header(chain, entities, read_limit)):
+        source = sources.pop(key)
+        where = "/".join([*(f"{g}[{i}]" if i else g for g, i in source.path), source.point])
+        address = entities.pop(key)["address"]
+        reason = f"no read of {read_limit} registers holds it with its scale factor"
+        skipped.append(Skipped(source.model_id, address, where, reason))
     document = _header(chain, entities, read_limit)
     status = next((k for k, s in sources.items() if _is_status(s, entities[k])), None)
     if status is not None:
         document["status"] = status
     return BuiltMapping(document, sources, tuple(skipped))
+
+
+def _unplannable(document: dict[str, Any]) -> tuple[str, ...]:
+    """The keys the planner cannot read: a value whose read with its scale factor
+    overlaps another's so that together they pass the read limit (the planner reads
+    overlapping pairs whole); the full set of entities is the most any poll reads."""
+    if not document["entities"]:
+        return ()
+    mapping = Mapping.model_validate(document)
+    return plan_reads(mapping.points().values(), limits_for(mapping)).unplannable
 
 
 def _header(chain: Chain, entities: dict[str, dict[str, Any]], read_limit: int) -> dict[str, Any]:

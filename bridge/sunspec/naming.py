@@ -64,7 +64,8 @@ def sentence(label: str) -> str:
         w if i == 0 or sum(c.isupper() for c in w) > 1 or any(c.isdigit() for c in w) else w.lower()
         for i, w in enumerate(words)
     ]
-    return " ".join(shown)
+    name = " ".join(shown)
+    return name[:1].upper() + name[1:]
 
 
 # capitals kept in a symbol's name (GROUND_FAULT, DC_OVER_VOLT) besides the library's own
