@@ -8,6 +8,7 @@ scale factors applied); every point the image leaves unimplemented reads None.
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 import pytest
@@ -19,6 +20,7 @@ from bridge.core.planner import limits_for, plan_reads
 from bridge.sunspec.image import DeviceImage, build_image
 from bridge.sunspec.mapping import BuiltMapping, build_mapping
 from bridge.sunspec.models import GroupDef, load_model, model_ids
+from bridge.sunspec.walk import read_chain
 from tests.sunspec_devices import built_model, common, every_image
 from tests.sunspec_reference import differences, expected_values, reference_models, walked
 
@@ -208,3 +210,21 @@ def test_a_value_no_read_holds_with_its_scale_factor_is_left_out_with_the_reason
     assert {s.point.split("/")[0] for s in far} == {"curve[3]", "curve[4]"}
     kept = built.document["entities"]
     assert "lvrt_curve_3_v10" in kept and "lvrt_curve_3_v12" not in kept
+
+
+@pytest.mark.parametrize("limit", [4, 50, 125])
+def test_read_chain_reads_every_model_register_in_reads_within_the_limit(limit: int) -> None:
+    image = build_image(IMAGES["device_1547"])
+    chain = walked(image)
+    asked: list[tuple[int, int]] = []
+
+    async def read(address: int, count: int) -> list[int]:
+        asked.append((address, count))
+        return [image.registers[a] for a in range(address, address + count)]
+
+    words = asyncio.run(read_chain(read, chain, limit))
+    start, end = chain.models[0].address, chain.models[-1].end
+    assert words == {a: image.registers[a] for a in range(start, end)}
+    assert all(count <= limit for _, count in asked)
+    assert len(asked) == sum(-(-(m.length + 2) // limit) for m in chain.models)
+    assert build_mapping(chain, words).document == build_mapping(chain, image.registers).document
