@@ -9,14 +9,17 @@ scale factors applied); every point the image leaves unimplemented reads None.
 from __future__ import annotations
 
 import asyncio
+import json
 from typing import Any
 
 import pytest
 
 from bridge.core import codec
+from bridge.core.discovery import DeviceInfo, Origin, build_discovery
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping
 from bridge.core.planner import limits_for, plan_reads
+from bridge.core.topics import Topics
 from bridge.sunspec.image import DeviceImage, build_image
 from bridge.sunspec.mapping import BuiltMapping, build_mapping
 from bridge.sunspec.models import GroupDef, load_model, model_ids
@@ -228,3 +231,33 @@ def test_read_chain_reads_every_model_register_in_reads_within_the_limit(limit: 
     assert all(count <= limit for _, count in asked)
     assert len(asked) == sum(-(-(m.length + 2) // limit) for m in chain.models)
     assert build_mapping(chain, words).document == build_mapping(chain, image.registers).document
+
+
+@pytest.mark.parametrize("allowed", [False, True])
+def test_home_assistant_discovery_of_a_built_mapping(allowed: bool) -> None:
+    mapping = built_device("inverter_mppt").mapping()
+    device = DeviceInfo(
+        id="inverter",
+        name="Inverter",
+        mapping=mapping,
+        options={},
+        bus="rs485",
+        unit=1,
+        allow_dangerous_writes=allowed,
+        fast_interval=2.0,
+        slow_interval=60.0,
+    )
+    [message] = build_discovery(device, Topics("modbus", "homeassistant"), Origin(), mode="device")
+    components = json.loads(message.payload)["cmps"]
+    assert set(mapping.entities) <= set(components)
+    assert {"alarms", "alarm_events"} <= set(components)  # issue 25's alarms and events
+    platforms = {c["platform"] for c in components.values()}
+    assert {"sensor", "binary_sensor", "event"} <= platforms
+    assert (components["common_da"]["platform"] == "number") is allowed  # dangerous
+    energy = components["inverter_three_phase_wh"]
+    assert (energy["device_class"], energy["state_class"], energy["unit_of_measurement"]) == (
+        "energy",
+        "total_increasing",
+        "Wh",
+    )
+    assert components["inverter_three_phase_evt1_ground_fault"]["platform"] == "binary_sensor"
