@@ -23,7 +23,7 @@ from bridge.core.topics import Topics
 from bridge.sunspec.image import DeviceImage, build_image
 from bridge.sunspec.mapping import BuiltMapping, build_mapping
 from bridge.sunspec.models import GroupDef, load_model, model_ids
-from bridge.sunspec.walk import read_chain
+from bridge.sunspec.walk import Chain, ChainModel, read_chain
 from tests.sunspec_devices import built_model, common, every_image
 from tests.sunspec_reference import differences, expected_values, reference_models, walked
 
@@ -261,3 +261,36 @@ def test_home_assistant_discovery_of_a_built_mapping(allowed: bool) -> None:
         "Wh",
     )
     assert components["inverter_three_phase_evt1_ground_fault"]["platform"] == "binary_sensor"
+
+
+def test_a_model_twice_in_the_chain_gets_keys_of_its_own() -> None:
+    device = {
+        "models": [
+            common("Two meters", "M-2"),
+            built_model(203, seed=1),
+            built_model(203, seed=2),
+            {"ID": 65535, "L": 0},
+        ]
+    }
+    image = build_image(device)
+    chain = walked(image)
+    built = build_mapping(chain, image.registers)
+    entities = built.document["entities"]
+    first, second = entities["ac_meter_abcn_w"], entities["ac_meter_abcn_2_w"]
+    assert second["address"] - first["address"] == chain.models[2].address - chain.models[1].address
+    assert second["scale_by"] == "ac_meter_abcn_2_w_sf"
+    assert first["name"] != second["name"]
+    models = reference_models(image, chain, device)
+    assert differences(decoded(built, image), expected_values(built, models)) == []
+
+
+def test_a_model_without_a_definition_is_left_out_with_the_reason() -> None:
+    image = build_image(IMAGES["meter"])
+    walked_chain = walked(image)
+    unknown = ChainModel(64999, walked_chain.models[-1].end, 4)
+    chain = Chain(walked_chain.base, (*walked_chain.models, unknown), walked_chain.common, 0)
+    built = build_mapping(chain, image.registers)
+    [left_out] = [s for s in built.skipped if not s.point]
+    assert (left_out.model, left_out.address) == (64999, unknown.address)
+    assert "no readable definition" in left_out.reason
+    assert built.mapping().entities.keys() == build_mapping(walked_chain).mapping().entities.keys()
