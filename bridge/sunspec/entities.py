@@ -22,6 +22,7 @@ from bridge.sunspec.naming import group_label, key_of, presentation, sentence, s
 from bridge.sunspec.walk import ChainModel
 
 NOT_IMPLEMENTED = "not implemented"
+PADDING = "padding"
 Path = tuple[tuple[str, int], ...]
 
 _TYPES = {
@@ -38,7 +39,7 @@ _UNIMPLEMENTED = {
     "float32": 0x7FC00000, "float64": 0x7FF8000000000000, "string": 0,
 }  # fmt: skip
 _LEFT_OUT = {
-    "pad": "padding",
+    "pad": PADDING,
     "eui48": "an EUI-48 (MAC) address: no entity type shows it",
     "ipv6addr": "an IPv6 address: no entity type shows it",
 }
@@ -150,8 +151,8 @@ def _number(context: ModelContext, placed: PlacedPoint, entity: dict[str, Any]) 
         last = max(placed.offset + point.size, factor.offset + factor.point.size)
         if last - first > context.read_limit:
             return (
-                f"its scale factor {factor.point.name} is {last - first} registers away with "
-                f"it: more than one read of {context.read_limit} holds"
+                f"it and its scale factor {factor.point.name} span {last - first} registers, "
+                f"more than one read of {context.read_limit}"
             )
         entity["scale_by"] = context.key(factor)
     counter = point.type in _ACCUMULATORS or (

@@ -22,15 +22,17 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Mapping as AnyMapping
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
 from typing import Any
 
+import yaml
+
 from bridge.core.mapping import Mapping
 from bridge.core.planner import limits_for, plan_reads
-from bridge.sunspec.entities import ModelContext, Source, point_entities
+from bridge.sunspec.entities import PADDING, ModelContext, Source, point_entities
 from bridge.sunspec.models import (
-    HEADER,
     GroupDef,
     ModelDef,
     ModelDefinitionError,
@@ -38,7 +40,9 @@ from bridge.sunspec.models import (
     load_model,
 )
 from bridge.sunspec.naming import snake
-from bridge.sunspec.walk import Chain, ChainModel, text
+from bridge.sunspec.walk import BASES, Chain, ChainModel, Read, WalkLimits, read_chain, text, walk
+
+_Dumper: type[yaml.SafeDumper] = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 STATUS_POINTS = ("St", "State")  # an inverter's or a battery's operating state
 
@@ -64,6 +68,37 @@ class BuiltMapping:
     def mapping(self) -> Mapping:
         """The document validated (pydantic's ValidationError if the builder erred)."""
         return Mapping.model_validate(self.document)
+
+    def yaml(self) -> str:
+        """The document as a mapping file (``load_mapping`` reads it back), with what was
+        left out in its header's comments."""
+        lines = [
+            "# Built by modbus-mqtt-bridge from the SunSpec model definitions of the device's",
+            "# model chain (bridge/sunspec/mapping.py). Left out:",
+            *(
+                f"# - model {s.model} at {s.address}{' ' + s.point if s.point else ''}: {s.reason}"
+                for s in self.skipped
+                if s.reason != PADDING
+            ),
+        ]
+        if len(lines) == 2:
+            lines[-1] = lines[-1].removesuffix(" Left out:")
+        body = yaml.dump(
+            self.document, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=100
+        )
+        return "\n".join(lines) + "\n" + body
+
+
+async def build_from_device(
+    read: Read, bases: Sequence[int] = BASES, limits: WalkLimits | None = None
+) -> tuple[Chain, BuiltMapping]:
+    """Walk a device (``walk``), read its models (``read_chain``) and build its mapping:
+    ``read(address, count)`` reads holding registers of the unit, within
+    ``limits.read_limit``. The walk's errors as they are (NotSunSpecError: no marker)."""
+    limits = limits or WalkLimits()
+    chain = await walk(read, bases, limits)
+    registers = await read_chain(read, chain, limits.read_limit)
+    return chain, build_mapping(chain, registers, read_limit=limits.read_limit)
 
 
 def build_mapping(
@@ -201,4 +236,4 @@ def _module_ids(
     return ids
 
 
-__all__ = ["HEADER", "BuiltMapping", "Skipped", "Source", "build_mapping"]
+__all__ = ["BuiltMapping", "Skipped", "Source", "build_from_device", "build_mapping"]

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 
 from bridge.config import SerialBus, TcpBus
 from bridge.core.entity import Table
@@ -20,8 +19,7 @@ from bridge.modbus.commission import Submit, open_bus
 from bridge.modbus.engine import Engine
 from bridge.modbus.simulator import Simulator, SunSpecUnit
 from bridge.sunspec.image import DeviceImage, build_image
-from bridge.sunspec.mapping import BuiltMapping, build_mapping
-from bridge.sunspec.walk import read_chain, walk
+from bridge.sunspec.mapping import BuiltMapping, build_from_device
 from tests.integration.harness import (
     FAST_POLICY,
     Recorder,
@@ -56,9 +54,8 @@ async def built_over_the_bus(submit: Submit, unit: int) -> tuple[BuiltMapping, A
     async def read(address: int, count: int) -> tuple[int, ...]:
         return await submit(unit, Read(Table.HOLDING, address, count), 1.0)
 
-    chain = await walk(read)
-    registers = await read_chain(read, chain)
-    return build_mapping(chain, registers), chain
+    chain, built = await build_from_device(read)
+    return built, chain
 
 
 async def published_equals_pysunspec2(tmp_path: Path, bus: dict[str, Any]) -> None:
@@ -70,8 +67,7 @@ async def published_equals_pysunspec2(tmp_path: Path, bus: dict[str, Any]) -> No
     devices = []
     for unit, (name, _) in PLACES.items():
         path = tmp_path / f"{name}.yaml"
-        text = yaml.safe_dump(builds[unit][0].document, allow_unicode=True, sort_keys=False)
-        path.write_text(text, encoding="utf-8")
+        path.write_text(builds[unit][0].yaml(), encoding="utf-8")
         devices.append(
             {
                 "id": name,

@@ -17,17 +17,25 @@ import pytest
 from bridge.core import codec
 from bridge.core.discovery import DeviceInfo, Origin, build_discovery
 from bridge.core.entity import Table
-from bridge.core.mapping import Mapping
+from bridge.core.mapping import Mapping, parse_mapping
 from bridge.core.planner import limits_for, plan_reads
 from bridge.core.topics import Topics
+from bridge.errors import DeviceExceptionError
 from bridge.sunspec.image import DeviceImage, build_image
-from bridge.sunspec.mapping import BuiltMapping, build_mapping
+from bridge.sunspec.mapping import BuiltMapping, build_from_device, build_mapping
 from bridge.sunspec.models import GroupDef, load_model, model_ids
-from bridge.sunspec.walk import Chain, ChainModel, read_chain
+from bridge.sunspec.walk import Chain, ChainModel, WalkLimits, read_chain
 from tests.sunspec_devices import built_model, common, every_image
 from tests.sunspec_reference import differences, expected_values, reference_models, walked
 
-_LEFT_OUT = ("padding", "an EUI-48", "an IPv6", "its scale factor", "150 registers")
+_LEFT_OUT = (
+    "padding",
+    "an EUI-48",
+    "an IPv6",
+    "it and its scale factor",
+    "no read",
+    "150 registers",
+)
 
 
 def one_model_device(model_id: int) -> dict[str, Any]:
@@ -208,7 +216,7 @@ def test_every_entity_is_planned_at_most_one_read_per_model(name: str) -> None:
 
 def test_a_value_no_read_holds_with_its_scale_factor_is_left_out_with_the_reason() -> None:
     built = built_device("inverter_123")  # model 129: 3 curves of 48 points, SFs at the top
-    far = [s for s in built.skipped if s.reason.startswith(("its scale factor", "no read"))]
+    far = [s for s in built.skipped if s.reason.startswith(("it and its scale factor", "no read"))]
     assert far and all(s.model == 129 for s in far)
     assert {s.point.split("/")[0] for s in far} == {"curve[3]", "curve[4]"}
     kept = built.document["entities"]
@@ -294,3 +302,29 @@ def test_a_model_without_a_definition_is_left_out_with_the_reason() -> None:
     assert (left_out.model, left_out.address) == (64999, unknown.address)
     assert "no readable definition" in left_out.reason
     assert built.mapping().entities.keys() == build_mapping(walked_chain).mapping().entities.keys()
+
+
+@pytest.mark.parametrize("name", sorted(IMAGES))
+def test_the_yaml_of_a_built_mapping_loads_as_the_same_mapping(name: str) -> None:
+    built = built_device(name)
+    text = built.yaml()
+    assert parse_mapping(text, f"{name}.yaml") == built.mapping()
+    far = [s for s in built.skipped if s.reason != "padding"]
+    assert all(f"model {s.model} at {s.address} {s.point}: {s.reason}" in text for s in far)
+    assert "padding" not in text
+
+
+def test_build_from_device_walks_reads_and_builds_within_the_read_limit() -> None:
+    image = build_image(IMAGES["battery"], base=0)
+    asked: list[int] = []
+
+    async def read(address: int, count: int) -> list[int]:
+        asked.append(count)
+        if address not in image.registers:
+            raise DeviceExceptionError(2, "illegal data address", "fail")
+        return [image.registers[a] for a in range(address, address + count)]
+
+    chain, built = asyncio.run(build_from_device(read, limits=WalkLimits(read_limit=40)))
+    assert chain.base == 0 and max(asked) <= 40
+    assert built.mapping().protocol.max_read_registers == 40
+    assert built.document == build_mapping(chain, image.registers, read_limit=40).document
