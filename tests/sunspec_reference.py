@@ -13,6 +13,7 @@ from typing import Any
 from sunspec2.file.client import FileClientModel
 
 from bridge.core import codec
+from bridge.errors import DeviceExceptionError
 from bridge.sunspec.image import DeviceImage
 from bridge.sunspec.mapping import BuiltMapping, Source
 from bridge.sunspec.walk import Chain, walk
@@ -23,6 +24,8 @@ def walked(image: DeviceImage) -> Chain:
     registers = image.registers
 
     async def read(address: int, count: int) -> list[int]:
+        if not all(a in registers for a in range(address, address + count)):
+            raise DeviceExceptionError(2, "illegal data address", "fail")  # as a device does
         return [registers[a] for a in range(address, address + count)]
 
     return asyncio.run(walk(read))

@@ -13,6 +13,8 @@ import json
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from bridge.core import codec
 from bridge.core.discovery import DeviceInfo, Origin, build_discovery
@@ -328,3 +330,29 @@ def test_build_from_device_walks_reads_and_builds_within_the_read_limit() -> Non
     assert chain.base == 0 and max(asked) <= 40
     assert built.mapping().protocol.max_read_registers == 40
     assert built.document == build_mapping(chain, image.registers, read_limit=40).document
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    ids=st.lists(st.sampled_from(MODELS), min_size=1, max_size=4),
+    instances=st.integers(1, 3),
+    seed=st.integers(0, 1000),
+    base=st.sampled_from([40000, 50000, 0]),
+)
+def test_any_chain_of_models_builds_one_mapping_that_reads_like_pysunspec2(
+    ids: list[int], instances: int, seed: int, base: int
+) -> None:
+    models = [
+        _addresses_as_text(load_model(i).group, built_model(i, instances, seed + n))
+        for n, i in enumerate(ids)
+    ]
+    device = {"models": [common("Any", "SN-9"), *models, {"ID": 65535, "L": 0}]}
+    image = build_image(device, base)
+    chain = walked(image)
+    built = build_mapping(chain, image.registers)
+    mapping = built.mapping()
+    names = [e.name for e in mapping.entities.values()]
+    assert len(set(names)) == len(names)
+    assert plan_reads(mapping.points().values(), limits_for(mapping)).unplannable == ()
+    wanted = expected_values(built, reference_models(image, chain, device))
+    assert differences(decoded(built, image), wanted) == []
