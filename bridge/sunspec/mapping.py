@@ -31,11 +31,12 @@ import yaml
 
 from bridge.core.mapping import Mapping
 from bridge.core.planner import limits_for, plan_reads
-from bridge.sunspec.entities import PADDING, ModelContext, Source, point_entities
+from bridge.sunspec.entities import PADDING, Built, ModelContext, Source, point_entities
 from bridge.sunspec.models import (
     GroupDef,
     ModelDef,
     ModelDefinitionError,
+    PlacedPoint,
     layout,
     load_model,
 )
@@ -109,9 +110,7 @@ def build_mapping(
 ) -> BuiltMapping:
     """The mapping of a walked device (see the module's docstring)."""
     words = registers or {}
-    entities: dict[str, dict[str, Any]] = {}
-    sources: dict[str, Source] = {}
-    skipped: list[Skipped] = []
+    found = _Found()
     seen: Counter[int] = Counter()
     names: set[str] = set()
     for index, model in enumerate(chain.models):
@@ -120,7 +119,7 @@ def build_mapping(
             definition = load_model(model.id)
             placed = layout(definition, model.length, _counts(definition, model, words))
         except ModelDefinitionError as e:
-            skipped.append(Skipped(model.id, model.address, "", str(e)))
+            found.skipped.append(Skipped(model.id, model.address, "", str(e)))
             continue
         prefix = snake(definition.name) + (f"_{seen[model.id]}" if seen[model.id] > 1 else "")
         context = ModelContext(
@@ -135,26 +134,45 @@ def build_mapping(
             names=names,
         )
         for point in placed:
-            built, reason = point_entities(context, point)
-            if reason:
-                where = "/".join(
-                    [*(f"{g}[{i}]" if i else g for g, i in point.path), point.point.name]
-                )
-                skipped.append(Skipped(model.id, model.address + point.offset, where, reason))
-            for key, (entity, source) in built.items():
-                entities[key] = entity
-                sources[key] = source
-    for key in _unplannable(_header(chain, entities, read_limit)):
-        source = sources.pop(key)
-        where = "/".join([*(f"{g}[{i}]" if i else g for g, i in source.path), source.point])
-        address = entities.pop(key)["address"]
-        reason = f"no read of {read_limit} registers holds it with its scale factor"
-        skipped.append(Skipped(source.model_id, address, where, reason))
-    document = _header(chain, entities, read_limit)
-    status = next((k for k, s in sources.items() if _is_status(s, entities[k])), None)
+            found.add(model, point, *point_entities(context, point))
+    for key in _unplannable(_header(chain, found.entities, read_limit)):
+        found.drop(key, f"no read of {read_limit} registers holds it with its scale factor")
+    document = _header(chain, found.entities, read_limit)
+    status = next((k for k, s in found.sources.items() if _is_status(s, found.entities[k])), None)
     if status is not None:
         document["status"] = status
-    return BuiltMapping(document, sources, tuple(skipped))
+    return BuiltMapping(document, found.sources, tuple(found.skipped))
+
+
+@dataclass(slots=True)
+class _Found:
+    """The entities built so far, what each reads, and what was left out."""
+
+    entities: dict[str, dict[str, Any]] = field(default_factory=dict)
+    sources: dict[str, Source] = field(default_factory=dict)
+    skipped: list[Skipped] = field(default_factory=list)
+
+    def add(self, model: ChainModel, point: PlacedPoint, built: Built, reason: str) -> None:
+        if reason:
+            where = _where(point.path, point.point.name)
+            self.skipped.append(Skipped(model.id, model.address + point.offset, where, reason))
+        for key, (entity, source) in built.items():
+            if key in self.entities:  # two points, one key (no bundled definition has it)
+                self.skipped.append(Skipped(model.id, entity["address"], key, "its key is taken"))
+                continue
+            self.entities[key] = entity
+            self.sources[key] = source
+
+    def drop(self, key: str, reason: str) -> None:
+        source = self.sources.pop(key)
+        address = self.entities.pop(key)["address"]
+        where = _where(source.path, source.point)
+        self.skipped.append(Skipped(source.model_id, address, where, reason))
+
+
+def _where(path: tuple[tuple[str, int], ...], name: str) -> str:
+    """A point's place in its model: ``module[2]/DCW``."""
+    return "/".join([*(f"{group}[{index}]" if index else group for group, index in path), name])
 
 
 def _unplannable(document: dict[str, Any]) -> tuple[str, ...]:
@@ -220,7 +238,7 @@ def _group_labels(group: GroupDef) -> dict[str, str]:
 
 
 def _module_ids(
-    model: ChainModel, placed: tuple[Any, ...], words: AnyMapping[int, int]
+    model: ChainModel, placed: tuple[PlacedPoint, ...], words: AnyMapping[int, int]
 ) -> dict[tuple[tuple[str, int], ...], str]:
     """A repeating group instance's own name, its ``IDStr`` (model 160's modules), where
     the caller read it."""
