@@ -122,7 +122,8 @@ def point_entities(context: ModelContext, placed: PlacedPoint) -> tuple[Built, s
     if point.type == "string":
         entity |= {"count": point.size, "poll": "once", "ha": {"entity_category": "diagnostic"}}
     elif point.type in ("sunssf", "ipaddr"):
-        entity["ha"] = {"entity_category": "diagnostic"}
+        # a scale factor is read with every value it scales, whenever they are due
+        entity |= {"poll": "slow", "ha": {"entity_category": "diagnostic"}}
     elif point.type.startswith("enum") and point.symbols:
         entity["enum"] = _labels(point.symbols, _UNIMPLEMENTED[point.type])
     elif point.type.startswith("bitfield"):
@@ -135,6 +136,8 @@ def point_entities(context: ModelContext, placed: PlacedPoint) -> tuple[Built, s
         if reason:
             context.names.discard(entity["name"])
             return {}, reason
+    if point.static and "poll" not in entity:
+        entity["poll"] = "slow"  # the definition says it does not change (a rating)
     _writable(entity, point)
     return {key: (entity, source)}, ""
 

@@ -146,11 +146,13 @@ def test_a_number_is_scaled_by_its_sunssf_with_its_unit_and_classes() -> None:
     assert watts["ha"] == {"device_class": "power", "state_class": "measurement"}
     assert watts["sentinels"] == {0x8000: "not implemented"}
     factor = entities["inverter_three_phase_w_sf"]
-    assert (factor["type"], factor["sentinels"], factor["ha"]) == (
+    assert (factor["type"], factor["sentinels"], factor["ha"], factor["poll"]) == (
         "s16",
         {0x8000: "not implemented"},
         {"entity_category": "diagnostic"},
+        "slow",  # read with every value it scales
     )
+    assert "poll" not in watts
     energy = entities["inverter_three_phase_wh"]  # acc32: a counter
     assert (energy["type"], energy["sentinels"], energy["unit"]) == (
         "u32",
@@ -356,3 +358,17 @@ def test_any_chain_of_models_builds_one_mapping_that_reads_like_pysunspec2(
     assert plan_reads(mapping.points().values(), limits_for(mapping)).unplannable == ()
     wanted = expected_values(built, reference_models(image, chain, device))
     assert differences(decoded(built, image), wanted) == []
+
+
+def test_a_fast_pass_reads_each_value_with_its_scale_factor() -> None:
+    mapping = built_device("inverter_mppt").mapping()
+    points = mapping.points()
+    fast = [p for p in points.values() if p.entity.poll_spec == "fast"]
+    assert "inverter_three_phase_w_sf" not in {p.key for p in fast}
+    plan = plan_reads(fast, limits_for(mapping))
+    assert plan.unplannable == ()
+    for point in fast:
+        if point.scale_source is not None:
+            assert any(
+                point.address in r.span and point.scale_source.address in r.span for r in plan.reads
+            ), point.key
