@@ -249,7 +249,7 @@ def _module_ids(
         span = range(model.address + p.offset, model.address + p.offset + p.point.size)
         if all(a in words for a in span):
             found = text([words[a] for a in span])
-            if found:
+            if found and found.isprintable():  # else named by its index
                 ids[p.path] = found
     return ids
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import random
+import time
 from typing import Any
 
 import pytest
@@ -25,7 +27,7 @@ from bridge.core.topics import Topics
 from bridge.errors import DeviceExceptionError
 from bridge.sunspec.image import DeviceImage, build_image
 from bridge.sunspec.mapping import BuiltMapping, build_from_device, build_mapping
-from bridge.sunspec.models import GroupDef, load_model, model_ids
+from bridge.sunspec.models import GroupDef, ModelDefinitionError, layout, load_model, model_ids
 from bridge.sunspec.walk import Chain, ChainModel, WalkLimits, read_chain
 from tests.sunspec_devices import built_model, common, every_image
 from tests.sunspec_reference import differences, expected_values, reference_models, walked
@@ -372,3 +374,43 @@ def test_a_fast_pass_reads_each_value_with_its_scale_factor() -> None:
             assert any(
                 point.address in r.span and point.scale_source.address in r.span for r in plan.reads
             ), point.key
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    headers=st.lists(
+        st.tuples(st.sampled_from([1, *MODELS, 64999]), st.integers(0, 260)), max_size=4
+    ),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_whatever_a_device_answers_the_builder_gives_a_valid_mapping_or_none(
+    headers: list[tuple[int, int]], seed: int
+) -> None:
+    """Any model ids and lengths, any register content: models that do not lay out are
+    left out with the reason, the rest validate; nothing raises."""
+    rng = random.Random(seed)
+    address, models = 40002, []
+    for model_id, length in headers:
+        models.append(ChainModel(model_id, address, length))
+        address += 2 + length
+    chain = Chain(40000, tuple(models), None, 0)
+    words = {
+        a: rng.choice([0, 1, 2, 0xFFFF, 0x8000, rng.randrange(0x10000)]) for a in range(address)
+    }
+    built = build_mapping(chain, words)
+    laid_out = {s.model for s in built.sources.values()}
+    left_out = {s.address for s in built.skipped if not s.point}
+    for index, model in enumerate(models):  # each model: its entities, or why none
+        assert (index in laid_out) != (model.address in left_out), (model, built.skipped)
+    if built.document["entities"]:
+        assert isinstance(built.mapping(), Mapping)
+
+
+@pytest.mark.parametrize("model_id", [705, 707, 711, 803, 64410])
+def test_counts_the_length_cannot_hold_are_refused_at_once(model_id: int) -> None:
+    definition = load_model(model_id)
+    counts = dict.fromkeys(definition.count_points, 0xFFFF)
+    started = time.monotonic()
+    with pytest.raises(ModelDefinitionError, match="need more than L 300"):
+        layout(definition, 300, counts)
+    assert time.monotonic() - started < 1.0  # not 65535 x 65535 groups first
