@@ -43,6 +43,7 @@ _LEFT_OUT = {
     "eui48": "an EUI-48 (MAC) address: no entity type shows it",
     "ipv6addr": "an IPv6 address: no entity type shows it",
 }
+_CHARGE_STATES = frozenset({"SoC", "ChaState"})  # 802's and 124's state of charge
 _ACCUMULATORS = frozenset({"acc16", "acc32", "acc64"})
 _ALARM_WORDS = ("Evt", "Alrm", "Alm")  # event and alarm bitfields (Evt1, DCAlrm, GlblAlm)
 
@@ -167,6 +168,8 @@ def _number(context: ModelContext, placed: PlacedPoint, entity: dict[str, Any]) 
     ha: dict[str, Any] = {}
     if shown.device_class is not None:
         ha["device_class"] = shown.device_class
+    elif point.name in _CHARGE_STATES and shown.unit == "%":
+        ha["device_class"] = "battery"  # a battery's state of charge
     if shown.state_class is not None and point.access != "RW":
         ha["state_class"] = shown.state_class
     if ha:

@@ -414,3 +414,10 @@ def test_counts_the_length_cannot_hold_are_refused_at_once(model_id: int) -> Non
     with pytest.raises(ModelDefinitionError, match="need more than L 300"):
         layout(definition, 300, counts)
     assert time.monotonic() - started < 1.0  # not 65535 x 65535 groups first
+
+
+def test_a_batterys_state_of_charge_is_a_battery_sensor() -> None:
+    entities = built_device("battery").document["entities"]
+    for key in ("battery_soc", "storage_basic_chastate"):
+        assert entities[key]["unit"] == "%"
+        assert entities[key]["ha"] == {"device_class": "battery", "state_class": "measurement"}
