@@ -421,3 +421,23 @@ def test_a_batterys_state_of_charge_is_a_battery_sensor() -> None:
     for key in ("battery_soc", "storage_basic_chastate"):
         assert entities[key]["unit"] == "%"
         assert entities[key]["ha"] == {"device_class": "battery", "state_class": "measurement"}
+
+
+@pytest.mark.parametrize("name", ["device_1547", "battery", "inverter_123"])
+def test_a_writable_point_written_with_the_value_it_reads_writes_its_own_words(name: str) -> None:
+    """Every setting: the value decoded, encoded again, is the same registers (FC06 for
+    one, FC16 for more), scaled by the exponent the device holds."""
+    image = build_image(IMAGES[name])
+    built = build_mapping(walked(image), image.registers)
+    words = {(Table.HOLDING, a): w for a, w in image.registers.items()}
+    checked = 0
+    for key, point in built.mapping().points().items():
+        value = codec.decode(point, words)
+        if not point.entity.writable or value is None or point.entity.kind == "text":
+            continue
+        [write] = codec.encode(point, value, words)
+        assert write.function == (6 if point.count == 1 else 16), key
+        assert write.address == point.address, key
+        assert write.values == tuple(image.registers[a] for a in point.span), key
+        checked += 1
+    assert checked > 5
