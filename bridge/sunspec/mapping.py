@@ -133,8 +133,12 @@ def build_mapping(
             read_limit=read_limit,
             names=names,
         )
+        before = len(found.entities)
         for point in placed:
             found.add(model, point, *point_entities(context, point))
+        if len(found.entities) == before:
+            reason = f"none of its points (L {model.length}) is an entity"
+            found.skipped.append(Skipped(model.id, model.address, "", reason))
     for key in _unplannable(_header(chain, found.entities, read_limit)):
         found.drop(key, f"no read of {read_limit} registers holds it with its scale factor")
     document = _header(chain, found.entities, read_limit)
