@@ -204,7 +204,8 @@ def _labels(symbols: tuple[Symbol, ...], unimplemented: int) -> dict[int, str]:
 
 
 def _bits(context: ModelContext, placed: PlacedPoint, key: str, source: Source) -> Built:
-    """One read-only boolean per symbol of a bitfield; an alarm for event and alarm words."""
+    """One read-only boolean per symbol of a bitfield: an alarm for event and alarm words,
+    else a diagnostic one."""
     point = placed.point
     wide = point.type == "bitfield32"
     alarm = any(word in point.name for word in _ALARM_WORDS)
@@ -223,6 +224,8 @@ def _bits(context: ModelContext, placed: PlacedPoint, key: str, source: Source) 
         }
         if alarm:
             entity |= {"alarm": True, "ha": {"device_class": "problem"}}
+        else:  # a capability or a mode flag: there to look at, not on the dashboard
+            entity["ha"] = {"entity_category": "diagnostic"}
         bit_key = f"{key}_{snake(s.name)}"
         while bit_key in built:
             bit_key += f"_{s.value}"

@@ -184,6 +184,8 @@ def test_enums_bitfields_and_the_status() -> None:
     assert (ground["address"], ground["bit"]) == (raw["address"] + 1, 0)
     assert ground["alarm"] is True and ground["ha"] == {"device_class": "problem"}
     assert "inverter_three_phase_evt1_reserved_2" not in entities
+    modes = built_device("device_1547").document["entities"]["der_capacity_ctrlmodes_max_w"]
+    assert "alarm" not in modes and modes["ha"] == {"entity_category": "diagnostic"}
     symbols = load_model(160).group.point("Evt").symbols
     high = next(s for s in symbols if s.value >= 16 and not s.name.startswith("RESERVED"))
     bit = entities[f"mppt_evt_{high.name.lower()}"]  # bit 16 or more: the high word
