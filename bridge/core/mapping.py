@@ -24,6 +24,7 @@ from bridge.core import checks
 from bridge.core.address import format_address, to_wire
 from bridge.core.convention import name_problems
 from bridge.core.entity import Entity, Table
+from bridge.core.fingerprint import Fingerprint, check_fingerprint
 from bridge.core.protocol import OptionSpec, Protocol, write_function
 from bridge.core.variant import active_entities
 from bridge.core.yaml_source import parse_yaml
@@ -55,10 +56,15 @@ class Mapping(BaseModel):
     options: dict[str, OptionSpec] = Field(default_factory=dict)
     status: str | None = Field(None, description="key of the entity that is the device status")
     entities: dict[str, Entity] = Field(min_length=1)
+    fingerprint: Fingerprint | None = Field(
+        None, description="what a unit reads that tells it is this model (identify)"
+    )
 
     @model_validator(mode="after")
     def _check_whole(self) -> Self:
         errors = checks.check_mapping(self)
+        if self.fingerprint is not None:
+            errors += check_fingerprint(self.fingerprint, self.entities, self.protocol)
         if errors:
             raise ValueError("\n".join(errors))
         return self
