@@ -14,9 +14,10 @@ makes us that the unit is this model.
     confidence = (1 - prod(1 - w) over matched probes) * (sum of matched w / sum of all w)
 
 the strength of what matched, times the share of the evidence that matched: a unit
-that matches every probe scores ``1 - prod(1 - w)``; a probe that fails costs its share.
-A fingerprint with ``identifies: false`` (the manual names nothing only this device has)
-is capped at ``LIKE_CAP``: the answer is "unit answers like X", low confidence.
+that matches every probe scores ``1 - prod(1 - w)``; a probe that fails costs its share,
+a ``required`` probe that fails makes it 0. A fingerprint with ``identifies: false`` (the
+manual names nothing only this device has) scores that times ``LIKE_CAP`` (0.4): the
+answer is "unit answers like X", low confidence.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ class Probe(BaseModel):
     unit: bool = Field(False, description="the register reads the unit id it was asked at")
     answers: bool = Field(False, description="any values (no exception) match")
     weight: float = Field(gt=0, le=1, description="how sure a match alone makes us")
+    required: bool = Field(False, description="a unit failing it is not this model")
     note: str | None = None
 
     @model_validator(mode="after")
@@ -108,7 +110,7 @@ class Fingerprint(BaseModel):
     identifies: bool = Field(
         True,
         description="false: nothing the manual names is only this device's; a match "
-        f"says 'answers like' it, confidence at most {LIKE_CAP}",
+        f"says 'answers like' it, its confidence times {LIKE_CAP}",
     )
     note: str | None = None
     probes: tuple[Probe, ...] = Field(min_length=1, max_length=MAX_PROBES)
@@ -219,12 +221,13 @@ def score(fingerprint: Fingerprint, matched: Sequence[bool]) -> float:
     if len(matched) != len(weights):
         raise ValueError(f"{len(matched)} outcomes for {len(weights)} probes")
     hits = [w for w, hit in zip(weights, matched, strict=True) if hit]
-    if not hits:
+    missed = (p.required for p, hit in zip(fingerprint.probes, matched, strict=True) if not hit)
+    if not hits or any(missed):
         return 0.0
     strength = 1 - math.prod(1 - w for w in hits)
     confidence = strength * sum(hits) / sum(weights)
     if not fingerprint.identifies:
-        confidence = min(confidence, LIKE_CAP)
+        confidence *= LIKE_CAP
     return round(confidence, 3)
 
 

@@ -150,8 +150,11 @@ def test_ascii_text_drops_padding_and_masks_unprintable_bytes() -> None:
     assert ascii_text((0x4101, 0x2020)) == "A?"
 
 
-def fingerprint(*weights: float, identifies: bool = True) -> Fingerprint:
-    probes = [{"address": i, "answers": True, "weight": w} for i, w in enumerate(weights)]
+def fingerprint(*weights: float, identifies: bool = True, required: int = -1) -> Fingerprint:
+    probes = [
+        {"address": i, "answers": True, "weight": w, "required": i == required}
+        for i, w in enumerate(weights)
+    ]
     return Fingerprint.model_validate({"identifies": identifies, "probes": probes})
 
 
@@ -163,10 +166,17 @@ def test_score_is_strength_times_share() -> None:
     assert score(fp, [False, False]) == 0.0
 
 
-def test_a_fingerprint_that_does_not_identify_is_capped_low() -> None:
+def test_a_fingerprint_that_does_not_identify_is_scaled_low() -> None:
     fp = fingerprint(0.9, 0.9, identifies=False)
-    assert score(fp, [True, True]) == LIKE_CAP
+    assert score(fp, [True, True]) == round(0.99 * LIKE_CAP, 3)
     assert level(score(fp, [True, True])) == "low"
+    assert score(fp, [True, False]) < score(fp, [True, True])  # the order is kept
+
+
+def test_a_failed_required_probe_rules_the_model_out() -> None:
+    fp = fingerprint(0.2, 0.9, 0.9, required=0)
+    assert score(fp, [False, True, True]) == 0.0
+    assert score(fp, [True, False, False]) > 0.0
 
 
 def test_outcomes_must_match_the_probes() -> None:
