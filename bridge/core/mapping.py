@@ -11,6 +11,7 @@ entities a device has for its option values, and as which variant, is ``variant`
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
@@ -348,6 +349,12 @@ def in_library(path: Path) -> bool:
 def builtin_mapping_names() -> list[str]:
     """Names of the mappings shipped with the bridge (file stems)."""
     return sorted(path.stem for path in mappings_folder().glob("*.yaml"))
+
+
+@functools.cache
+def shipped_library() -> dict[str, Mapping]:
+    """Every shipped mapping by name, loaded once (what ``identify`` compares with)."""
+    return {name: load_mapping(builtin_mapping_path(name)) for name in builtin_mapping_names()}
 
 
 def builtin_mapping_path(name: str) -> Path:
