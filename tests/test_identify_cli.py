@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import textwrap
 from collections import Counter
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -73,3 +75,13 @@ def test_help_states_the_bound(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["identify", "--help"])
     assert "24 with the five shipped mappings" in " ".join(capsys.readouterr().out.split())
+
+
+def test_the_readme_shows_what_identify_prints(capsys: pytest.CaptureFixture[str]) -> None:
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    start = readme.index("    unit 3: answers like")
+    shown = readme[start : readme.index("mapping: soft_starter\n", start) + 22]
+    with Served(simulator((3, "soft_starter"))) as serving:
+        code, out, _ = run(capsys, "identify", "--bus", serving.bus, "--unit", "3")
+    assert code == 0
+    assert out == textwrap.dedent(shown)
