@@ -173,6 +173,17 @@ class Management:
         finally:
             self._raw[bus_id] -= 1
 
+    @asynccontextmanager
+    async def _scan_slot(self, scheduler: BusScheduler) -> AsyncIterator[None]:
+        """The bus's one place for a scan or an identify, or "busy"."""
+        if scheduler.bus_id in self._scanning:
+            raise RequestError(f"busy: a scan of bus {scheduler.bus_id} is running")
+        self._scanning.add(scheduler.bus_id)
+        try:
+            yield
+        finally:
+            self._scanning.discard(scheduler.bus_id)
+
     def _bus(self, bus_id: str | None) -> BusScheduler:
         schedulers = self.engine.schedulers
         if bus_id is None:
@@ -229,13 +240,8 @@ class Management:
             for device_id, p in self.engine.devices.items()
             if p.scheduler is scheduler
         }
-        if scheduler.bus_id in self._scanning:
-            raise RequestError(f"busy: a scan of bus {scheduler.bus_id} is running")
-        self._scanning.add(scheduler.bus_id)
-        try:
+        async with self._scan_slot(scheduler):
             found = await scan(scheduler_submit(scheduler, Priority.POLL), units, timeout)
-        finally:
-            self._scanning.discard(scheduler.bus_id)
         return {
             "bus": scheduler.bus_id,
             "probed": len(units),
@@ -254,20 +260,18 @@ class Management:
 
     async def _identify(self, request: DeviceIdentify) -> dict[str, Any]:
         """``identify`` (bridge/modbus/identify.py) through the bus's scheduler, with the
-        polls; one scan or identify per bus at a time. Only scores are answered, never the
-        values read."""
+        polls, one scan or identify per bus at a time: ``timeout`` for each unit's first
+        answer, the bus's for the reads after. Only scores are answered, not values read."""
         scheduler = self._bus(request.bus)
         units = request.unit_ids()
         timeout = request.timeout or self.settings.scan_timeout
-        if scheduler.bus_id in self._scanning:
-            raise RequestError(f"busy: a scan of bus {scheduler.bus_id} is running")
         library = await asyncio.to_thread(shipped_library)
-        self._scanning.add(scheduler.bus_id)
-        try:
+        wait = scheduler.transport.bus.timeout
+        async with self._scan_slot(scheduler):
             submit = scheduler_submit(scheduler, Priority.POLL)
-            found = await identify(submit, units, library, timeout, scheduler.bus_id)
-        finally:
-            self._scanning.discard(scheduler.bus_id)
+            found = await identify(
+                submit, units, library, timeout, scheduler.bus_id, read_timeout=wait
+            )
         return {
             "bus": scheduler.bus_id,
             "probed": len(units),

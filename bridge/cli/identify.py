@@ -35,7 +35,7 @@ from bridge.core.mapping import shipped_library
 from bridge.modbus.commission import open_bus
 from bridge.modbus.identify import identify
 
-IDENTIFY_TIMEOUT = 0.5
+IDENTIFY_TIMEOUT = 0.2  # for a unit's first answer, like scan's
 
 
 def add_parser(commands: Commands) -> None:
@@ -45,7 +45,8 @@ def add_parser(commands: Commands) -> None:
         "identify",
         help="tell what device answers at a unit (read-only)",
         description="Read a few registers of each unit, never writing: the scan probe "
-        "(holding 0; no answer within --timeout means no unit, one timeout spent), the "
+        "(holding 0; no answer within --timeout means no unit, one timeout spent; the "
+        "reads after it wait the bus's timeout), the "
         f"SunSpec marker 'SunS' at holding {', '.join(map(str, SUNSPEC_BASES))}, then "
         "each shipped mapping's fingerprint reads (only the function codes and read sizes "
         f"that mapping allows). At most {bound} requests per unit (24 with the five "
@@ -72,7 +73,7 @@ def add_parser(commands: Commands) -> None:
         type=seconds,
         default=IDENTIFY_TIMEOUT,
         metavar="SECONDS",
-        help=f"wait this long for each answer (default {IDENTIFY_TIMEOUT})",
+        help=f"wait this long for each unit's first answer (default {IDENTIFY_TIMEOUT})",
     )
     parser.set_defaults(handler=_guarded(_identify))
 
@@ -92,7 +93,15 @@ def _identify(args: argparse.Namespace, out: TextIO) -> int:
 
     async def session() -> None:
         async with open_bus(bus) as submit:
-            await identify(submit, units, mappings, args.timeout, bus.id, on_progress=heard)
+            await identify(
+                submit,
+                units,
+                mappings,
+                args.timeout,
+                bus.id,
+                on_progress=heard,
+                read_timeout=bus.timeout,
+            )
 
     asyncio.run(until_stopped(session()))
     if len(done) != len(units):

@@ -70,11 +70,19 @@ async def sunspec_base(submit: Submit, unit: int, timeout: float) -> int | None:
 
 
 async def identify_unit(
-    submit: Submit, unit: int, library: AnyMapping[str, Mapping], timeout: float, bus_id: str
+    submit: Submit,
+    unit: int,
+    library: AnyMapping[str, Mapping],
+    timeout: float,
+    bus_id: str,
+    *,
+    read_timeout: float | None = None,
 ) -> Identity | None:
-    """What ``unit`` is; None when it does not answer scan's probe (one timeout)."""
+    """What ``unit`` is; None when it does not answer scan's probe within ``timeout``
+    (one timeout). The reads after it wait ``read_timeout`` (default ``timeout``)."""
     if await probe(submit, unit, timeout) is None:
         return None
+    timeout = read_timeout or timeout
     counted = _Counted(submit)
     base = await sunspec_base(counted, unit, timeout)
     answers: dict[Read, tuple[int, ...] | None] = {}
@@ -97,11 +105,13 @@ async def identify(
     bus_id: str,
     *,
     on_progress: Callable[[int, Identity | None], None] | None = None,
+    read_timeout: float | None = None,
 ) -> list[Identity]:
     """``identify_unit`` for each of ``units`` in turn (one frame in flight)."""
     found = []
     for unit in tuple(units):
-        identity = await identify_unit(submit, unit, library, timeout, bus_id)
+        wait = read_timeout
+        identity = await identify_unit(submit, unit, library, timeout, bus_id, read_timeout=wait)
         if identity is not None:
             found.append(identity)
         if on_progress is not None:

@@ -22,7 +22,7 @@ from bridge.core.mapping import (
 from bridge.core.request import Read, Write
 from bridge.modbus.commission import Submit, open_bus
 from bridge.modbus.identify import identify, identify_unit, sunspec_base
-from bridge.modbus.simulator import SimulatedUnit, Simulator
+from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator
 from tests.integration.harness import serving_serial, serving_tcp
 
 SEEDS = builtin_mapping_names()
@@ -152,3 +152,25 @@ async def test_the_sunspec_marker_at_each_base() -> None:
         assert identity is not None and identity.best == "sunspec"
         assert identity.requests == 1 + SUNSPEC_BASES.index(base) + 1
         assert sim.writes == []
+
+
+@pytest.mark.asyncio
+async def test_a_unit_that_goes_silent_is_left_after_two_unanswered_reads() -> None:
+    sim = Simulator([SimulatedUnit(4, LIBRARY["vacon_nx"])], tick=0.0)
+    async with serving_tcp(sim) as port:
+        bus = TcpBus(id="t", transport="tcp", host="127.0.0.1", tcp_port=port, timeout=TIMEOUT)
+        async with open_bus(bus) as submit:
+
+            async def dies_after_the_probe(
+                unit: int, request: Read | Write, timeout: float
+            ) -> tuple[int, ...]:
+                values = await submit(unit, request, timeout)
+                sim.set_quirks(4, Quirks(dead=True))  # the unit answers once, then never
+                return values
+
+            identity = await identify_unit(dies_after_the_probe, 4, LIBRARY, TIMEOUT, "t")
+    assert identity is not None
+    assert identity.requests == 3  # the probe, then two reads unanswered
+    assert identity.note == "stopped: 2 reads went unanswered"
+    assert identity.matches == ()
+    assert sim.writes == []
