@@ -1,8 +1,9 @@
 """What answers at a unit: the library's fingerprints against what the unit read. Pure.
 
-``probe_plan(library)`` lists the reads ``identify`` sends after the unit answered scan's
-probe: the SunSpec marker reads (``SUNSPEC_BASES``), then every distinct fingerprint read
-of the library (a read two mappings share is sent once). ``rank`` scores each mapping
+After scan's probe ``identify`` reads the SunSpec marker (``SUNSPEC_BASES``), then each
+mapping's fingerprint reads (``probes_of``: required probes first; a mapping a failed
+required probe rules out gets no more reads; a read two mappings share is sent once:
+``probe_plan`` lists them all). ``rank`` scores each mapping
 (bridge/core/fingerprint.py) on the answers and orders the matches; ``Identity`` is one
 unit's answer, with the config snippet to paste.
 
@@ -18,7 +19,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from bridge.core.entity import Table
-from bridge.core.fingerprint import MAX_PROBES, Level, level, matches, probe_read, score
+from bridge.core.fingerprint import (
+    MAX_PROBES,
+    Level,
+    Probe,
+    level,
+    matches,
+    probe_read,
+    score,
+)
 from bridge.core.mapping import Mapping
 from bridge.core.request import Read
 
@@ -42,6 +51,15 @@ def is_marker(values: tuple[int, ...] | None) -> bool:
 def request_bound(library: AnyMapping[str, Mapping]) -> int:
     """The most requests ``identify`` sends one unit (scan's probe included)."""
     return 1 + len(SUNSPEC_BASES) + MAX_PROBES * len(library)
+
+
+def probes_of(mapping: Mapping) -> tuple[tuple[Probe, Read], ...]:
+    """A mapping's probes with their reads, the required ones first: once one of those
+    fails the mapping is ruled out and its other reads need not be sent."""
+    if mapping.fingerprint is None:
+        return ()
+    probes = sorted(mapping.fingerprint.probes, key=lambda probe: not probe.required)
+    return tuple((p, probe_read(p, mapping.entities, mapping.protocol)) for p in probes)
 
 
 def probe_plan(library: AnyMapping[str, Mapping]) -> tuple[Read, ...]:

@@ -4,9 +4,10 @@
         identity = await identify_unit(submit, 3, library, timeout=0.5, bus_id="rs485")
 
 One unit: scan's probe first (no answer: absent, one timeout spent, None); then the
-SunSpec marker (``sunspec_base``: holding 40000, 50000, 0); for a unit without it, every
-distinct fingerprint read of the library, each within its mapping's function codes and
-read limits (the mapping refuses a fingerprint that is not). Reads only: nothing here
+SunSpec marker (``sunspec_base``: holding 40000, 50000, 0); for a unit without it, each
+mapping's fingerprint reads, required ones first (a mapping ruled out gets no more), a
+read two mappings share sent once, each within its mapping's function codes and read
+limits (the mapping refuses a fingerprint that is not). Reads only: nothing here
 builds a write. The answers are scored by ``rank``.
 """
 
@@ -15,13 +16,14 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from collections.abc import Mapping as AnyMapping
 
+from bridge.core.fingerprint import matches
 from bridge.core.identify import (
     MAX_SILENT,
     SUNSPEC_BASES,
     Identity,
     is_marker,
     marker_read,
-    probe_plan,
+    probes_of,
     rank,
 )
 from bridge.core.mapping import Mapping
@@ -85,16 +87,30 @@ async def identify_unit(
     timeout = read_timeout or timeout
     counted = _Counted(submit)
     base = await sunspec_base(counted, unit, timeout)
+    if base is not None:
+        return Identity(unit, bus_id, base, (), 1 + counted.requests)
+    answers = await _fingerprint_answers(counted, unit, library, timeout)
+    if answers is None:
+        note = f"stopped: {counted.silent} reads went unanswered"
+        return Identity(unit, bus_id, None, (), 1 + counted.requests, note)
+    found = rank(library, unit, answers)
+    return Identity(unit, bus_id, None, found, 1 + counted.requests)
+
+
+async def _fingerprint_answers(
+    counted: _Counted, unit: int, library: AnyMapping[str, Mapping], timeout: float
+) -> dict[Read, tuple[int, ...] | None] | None:
+    """What the unit answered to each fingerprint read sent; None once it went silent."""
     answers: dict[Read, tuple[int, ...] | None] = {}
-    note = None
-    if base is None:
-        for read in probe_plan(library):
+    for mapping in library.values():
+        for check, read in probes_of(mapping):
             if counted.silent >= MAX_SILENT:
-                note = f"stopped: {counted.silent} reads went unanswered"
-                break
-            answers[read] = await counted.read(unit, read, timeout)
-    matches = rank(library, unit, answers) if base is None else ()
-    return Identity(unit, bus_id, base, matches, 1 + counted.requests, note)
+                return None
+            if read not in answers:
+                answers[read] = await counted.read(unit, read, timeout)
+            if check.required and not matches(check, unit, answers[read]):
+                break  # ruled out: the rest of its reads would say nothing
+    return answers
 
 
 async def identify(
