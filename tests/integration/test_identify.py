@@ -86,6 +86,7 @@ def check_bus(sim: Simulator, placed: dict[str, int], found: list[Identity]) -> 
     per_unit = Counter(unit for unit, _, _ in sim.requests)
     bound = request_bound(LIBRARY)
     assert all(count <= bound for count in per_unit.values()), per_unit
+    assert per_unit[placed["sunspec"]] == 2  # scan's probe and the marker at 40000
     assert {code for _, code, _ in sim.requests} <= {1, 2, 3, 4}
 
 
