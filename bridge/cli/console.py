@@ -71,6 +71,7 @@ _LAZY = {  # command: (module, the function that adds its parser)
     "scan": ("bridge.cli.commission", "add_parsers"),
     "read": ("bridge.cli.commission", "add_parsers"),
     "write": ("bridge.cli.commission", "add_parsers"),
+    "identify": ("bridge.cli.identify", "add_parser"),
     "demo": ("bridge.cli.demo", "add_parser"),
     "import": ("bridge.cli.importer", "add_parser"),
 }

@@ -11,6 +11,7 @@ entities a device has for its option values, and as which variant, is ``variant`
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from bridge.core import checks
 from bridge.core.address import format_address, to_wire
 from bridge.core.convention import name_problems
 from bridge.core.entity import Entity, Table
+from bridge.core.fingerprint import Fingerprint, check_fingerprint
 from bridge.core.protocol import OptionSpec, Protocol, write_function
 from bridge.core.variant import active_entities
 from bridge.core.yaml_source import parse_yaml
@@ -55,10 +57,15 @@ class Mapping(BaseModel):
     options: dict[str, OptionSpec] = Field(default_factory=dict)
     status: str | None = Field(None, description="key of the entity that is the device status")
     entities: dict[str, Entity] = Field(min_length=1)
+    fingerprint: Fingerprint | None = Field(
+        None, description="what a unit reads that tells it is this model (identify)"
+    )
 
     @model_validator(mode="after")
     def _check_whole(self) -> Self:
         errors = checks.check_mapping(self)
+        if self.fingerprint is not None:
+            errors += check_fingerprint(self.fingerprint, self.entities, self.protocol)
         if errors:
             raise ValueError("\n".join(errors))
         return self
@@ -342,6 +349,12 @@ def in_library(path: Path) -> bool:
 def builtin_mapping_names() -> list[str]:
     """Names of the mappings shipped with the bridge (file stems)."""
     return sorted(path.stem for path in mappings_folder().glob("*.yaml"))
+
+
+@functools.cache
+def shipped_library() -> dict[str, Mapping]:
+    """Every shipped mapping by name, loaded once (what ``identify`` compares with)."""
+    return {name: load_mapping(builtin_mapping_path(name)) for name in builtin_mapping_names()}
 
 
 def builtin_mapping_path(name: str) -> Path:
