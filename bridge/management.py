@@ -40,7 +40,6 @@ from bridge.config import (
     load_device_mapping,
 )
 from bridge.core.guard import Guard
-from bridge.core.identify import request_bound
 from bridge.core.instance import Instance
 from bridge.core.management_request import (
     MAX_UNIT,
@@ -75,7 +74,7 @@ from bridge.modbus.commission import (
     scheduler_submit,
 )
 from bridge.modbus.engine import Engine
-from bridge.modbus.identify import identify
+from bridge.modbus.identify import identify, request_bound
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import BusScheduler, Priority
 

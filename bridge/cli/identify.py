@@ -30,27 +30,32 @@ from bridge.cli.commission import (
 )
 from bridge.cli.lifecycle import until_stopped
 from bridge.core.fingerprint import HIGH, LIKE_CAP, MEDIUM
-from bridge.core.identify import SUNSPEC_BASES, Identity, request_bound
+from bridge.core.identify import Identity
 from bridge.core.mapping import shipped_library
 from bridge.modbus.commission import open_bus
-from bridge.modbus.identify import identify
+from bridge.modbus.identify import identify, request_bound
+from bridge.sunspec.walk import BASES
 
 IDENTIFY_TIMEOUT = 0.2  # for a unit's first answer, like scan's
 
 
 def add_parser(commands: Commands) -> None:
     """Register ``identify``."""
-    bound = f"1 + {len(SUNSPEC_BASES)} + 4 per mapping of the library"
+    bound = (
+        f"1 + the larger of {request_bound({}) - 1} (a SunSpec walk) and {len(BASES)} + 4 "
+        f"per mapping of the library ({request_bound(shipped_library())} with the shipped ones)"
+    )
     parser = commands.add_parser(
         "identify",
         help="tell what device answers at a unit (read-only)",
         description="Read a few registers of each unit, never writing: the scan probe "
         "(holding 0; no answer within --timeout means no unit, one timeout spent; the "
         "reads after it wait the bus's timeout), the "
-        f"SunSpec marker 'SunS' at holding {', '.join(map(str, SUNSPEC_BASES))}, then "
+        f"SunSpec marker 'SunS' at holding {', '.join(map(str, BASES))} (where found, the "
+        "model chain and the common model: manufacturer, model, serial, version), else "
         "each shipped mapping's fingerprint reads (only the function codes and read sizes "
-        f"that mapping allows). At most {bound} requests per unit (24 with the five "
-        "shipped mappings); a unit that leaves 2 reads unanswered is left. Confidence: "
+        f"that mapping allows). At most {bound} requests per unit; a unit that leaves 2 "
+        "reads unanswered is left. Confidence: "
         "(1 - product of (1 - weight) over the probes that matched) x (their share of "
         f"all weights); high from {HIGH}, medium from {MEDIUM}, low below; a mapping whose "
         f"manual names nothing identifying says 'answers like' and is scaled by {LIKE_CAP}.",

@@ -1,15 +1,18 @@
 """What answers at a unit: the library's fingerprints against what the unit read. Pure.
 
-After scan's probe ``identify`` reads the SunSpec marker (``SUNSPEC_BASES``), then each
+After scan's probe ``identify`` walks a SunSpec device's model chain (bridge/sunspec/
+walk.py: the marker at 40000, 50000, 0, then the models; ``SunSpecDevice`` is what it
+found), else reads each
 mapping's fingerprint reads (``probes_of``: required probes first; a mapping a failed
 required probe rules out gets no more reads; a read two mappings share is sent once:
 ``probe_plan`` lists them all). ``rank`` scores each mapping
 (bridge/core/fingerprint.py) on the answers and orders the matches; ``Identity`` is one
 unit's answer, with the config snippet to paste.
 
-Bound: at most ``1 + len(SUNSPEC_BASES) + MAX_PROBES x mappings`` requests per unit
-(24 with the five shipped mappings); a unit that does not answer scan's probe costs that
-one timeout; a unit that answered and then leaves ``MAX_SILENT`` reads unanswered is left.
+Bound: at most ``1 + max(walk, bases + MAX_PROBES x mappings)`` requests per unit
+(``request_bound``; 47 with the five shipped mappings); a unit that does not answer scan's
+probe costs that one timeout; a unit that answered and then leaves ``MAX_SILENT`` reads
+unanswered is left.
 """
 
 from __future__ import annotations
@@ -18,7 +21,6 @@ from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.core.entity import Table
 from bridge.core.fingerprint import (
     MAX_PROBES,
     Level,
@@ -31,26 +33,50 @@ from bridge.core.fingerprint import (
 from bridge.core.mapping import Mapping
 from bridge.core.request import Read
 
-SUNSPEC_BASES = (40000, 50000, 0)
-SUNS = (0x5375, 0x6E53)  # "SunS"
 MAX_SILENT = 2
 MAX_MATCHES = 3
 Answers = AnyMapping[Read, tuple[int, ...] | None]  # None: refused, garbled or silent
 
 
-def marker_read(base: int) -> Read:
-    """The read of the SunSpec marker at ``base`` (2 holding registers)."""
-    return Read(Table.HOLDING, base, len(SUNS))
+def request_bound(library: AnyMapping[str, Mapping], walk: int, bases: int) -> int:
+    """The most requests ``identify`` sends one unit (scan's probe included): a SunSpec
+    device's walk (at most ``walk`` requests) or, where ``bases`` reads found no marker,
+    the library's probes."""
+    return 1 + max(walk, bases + MAX_PROBES * len(library))
 
 
-def is_marker(values: tuple[int, ...] | None) -> bool:
-    """Whether the registers read ``SunS``."""
-    return values is not None and tuple(values[: len(SUNS)]) == SUNS
+@dataclass(frozen=True, slots=True)
+class SunSpecDevice:
+    """A SunSpec device as its walk found it: the marker's base, the common model's
+    strings (None where unimplemented), the model ids in chain order; ``note`` when the
+    chain could not be walked to its end (the marker is there all the same)."""
 
+    base: int
+    manufacturer: str | None = None
+    model: str | None = None
+    version: str | None = None
+    serial_number: str | None = None
+    models: tuple[int, ...] = ()
+    note: str | None = None
 
-def request_bound(library: AnyMapping[str, Mapping]) -> int:
-    """The most requests ``identify`` sends one unit (scan's probe included)."""
-    return 1 + len(SUNSPEC_BASES) + MAX_PROBES * len(library)
+    def describe(self) -> str:
+        named = " ".join(p for p in (self.manufacturer, self.model) if p) or "unnamed"
+        extra = [f"serial {self.serial_number}"] if self.serial_number else []
+        extra += [f"version {self.version}"] if self.version else []
+        extra += [f"models {', '.join(map(str, self.models))}"] if self.models else []
+        extra += [f"marker at {self.base}"]
+        return f"SunSpec device {named} ({'; '.join(extra)})"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "base": self.base,
+            "manufacturer": self.manufacturer,
+            "model": self.model,
+            "version": self.version,
+            "serial_number": self.serial_number,
+            "models": list(self.models),
+            "note": self.note,
+        }
 
 
 def probes_of(mapping: Mapping) -> tuple[tuple[Probe, Read], ...]:
@@ -139,12 +165,12 @@ def snippet(bus: str, unit: int, mapping: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class Identity:
-    """What one unit is: a SunSpec device (``sunspec_base``), library matches, or neither.
+    """What one unit is: a SunSpec device (``sunspec``), library matches, or neither.
     ``requests``: the requests sent to it; ``note``: why probing stopped early, if it did."""
 
     unit: int
     bus: str
-    sunspec_base: int | None
+    sunspec: SunSpecDevice | None
     matches: tuple[Match, ...]
     requests: int
     note: str | None = None
@@ -152,14 +178,14 @@ class Identity:
     @property
     def best(self) -> str | None:
         """The mapping to configure: ``sunspec`` for a SunSpec device, else the best match."""
-        if self.sunspec_base is not None:
+        if self.sunspec is not None:
             return "sunspec"
         return self.matches[0].mapping if self.matches else None
 
     def summary(self) -> str:
         """One line for people."""
-        if self.sunspec_base is not None:
-            return f"SunSpec device (marker at base {self.sunspec_base})"
+        if self.sunspec is not None:
+            return self.sunspec.describe()
         if not self.matches:
             return "answers, but matches no mapping of the library"
         return self.matches[0].describe()
@@ -169,7 +195,7 @@ class Identity:
         return {
             "unit": self.unit,
             "summary": self.summary(),
-            "sunspec": None if self.sunspec_base is None else {"base": self.sunspec_base},
+            "sunspec": None if self.sunspec is None else self.sunspec.as_dict(),
             "matches": [m.as_dict() for m in self.matches],
             "requests": self.requests,
             "note": self.note,

@@ -4,7 +4,8 @@
         identity = await identify_unit(submit, 3, library, timeout=0.5, bus_id="rs485")
 
 One unit: scan's probe first (no answer: absent, one timeout spent, None); then the
-SunSpec marker (``sunspec_base``: holding 40000, 50000, 0); for a unit without it, each
+SunSpec walk (``sunspec_device``: the marker at holding 40000, 50000, 0, the model chain
+and the common model, bridge/sunspec/walk.py, within ``WALK``); for a unit without it, each
 mapping's fingerprint reads, required ones first (a mapping ruled out gets no more), a
 read two mappings share sent once, each within its mapping's function codes and read
 limits (the mapping refuses a fingerprint that is not). Reads only: nothing here
@@ -16,20 +17,24 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from collections.abc import Mapping as AnyMapping
 
+from bridge.core.entity import Table
 from bridge.core.fingerprint import matches
-from bridge.core.identify import (
-    MAX_SILENT,
-    SUNSPEC_BASES,
-    Identity,
-    is_marker,
-    marker_read,
-    probes_of,
-    rank,
-)
+from bridge.core.identify import MAX_SILENT, Identity, SunSpecDevice, probes_of, rank
+from bridge.core.identify import request_bound as bound_of
 from bridge.core.mapping import Mapping
 from bridge.core.request import Read, Write
-from bridge.errors import DeviceExceptionError, DeviceTimeoutError, FrameError
+from bridge.errors import (
+    DeviceExceptionError,
+    DeviceTimeoutError,
+    FrameError,
+    NotSunSpecError,
+    SunSpecChainError,
+)
 from bridge.modbus.commission import Submit, probe
+from bridge.sunspec.walk import BASES, WalkLimits, walk
+from bridge.sunspec.walk import request_bound as walk_bound
+
+WALK = WalkLimits(max_models=40)  # identify's walk: a device lists 5 to 20 models
 
 
 class _Counted:
@@ -58,17 +63,37 @@ class _Counted:
             return None
 
 
-async def sunspec_base(submit: Submit, unit: int, timeout: float) -> int | None:
-    """The base (40000, 50000 or 0) whose 2 holding registers read ``SunS``, or None: the
-    one place a SunSpec model walk starts from. Stops at the first base found, and after
-    ``MAX_SILENT`` unanswered reads."""
+def request_bound(library: AnyMapping[str, Mapping]) -> int:
+    """The most requests ``identify`` sends one unit (scan's probe included)."""
+    return bound_of(library, walk_bound(BASES, WALK), len(BASES))
+
+
+async def sunspec_device(submit: Submit, unit: int, timeout: float) -> SunSpecDevice | None:
+    """The SunSpec device at ``unit`` (its chain walked from the first base with the
+    marker, within ``WALK``), or None where no base has it. A chain that cannot be walked
+    to its end still names the base, with a note."""
     counted = submit if isinstance(submit, _Counted) else _Counted(submit)
-    for base in SUNSPEC_BASES:
-        if counted.silent >= MAX_SILENT:
-            return None
-        if is_marker(await counted.read(unit, marker_read(base), timeout)):
-            return base
-    return None
+
+    async def read(address: int, count: int) -> tuple[int, ...]:
+        return await counted(unit, Read(Table.HOLDING, address, count), timeout)
+
+    try:
+        chain = await walk(read, BASES, WALK)
+    except NotSunSpecError:
+        return None
+    except SunSpecChainError as e:
+        return SunSpecDevice(e.base, note=str(e)) if e.base is not None else None
+    common = chain.common
+    if common is None:
+        return SunSpecDevice(chain.base, models=chain.model_ids)
+    return SunSpecDevice(
+        chain.base,
+        common.manufacturer,
+        common.model,
+        common.version,
+        common.serial_number,
+        chain.model_ids,
+    )
 
 
 async def identify_unit(
@@ -86,9 +111,13 @@ async def identify_unit(
         return None
     timeout = read_timeout or timeout
     counted = _Counted(submit)
-    base = await sunspec_base(counted, unit, timeout)
-    if base is not None:
-        return Identity(unit, bus_id, base, (), 1 + counted.requests)
+    try:
+        sunspec = await sunspec_device(counted, unit, timeout)
+    except (DeviceTimeoutError, FrameError):
+        note = "stopped: the SunSpec marker's read went unanswered"
+        return Identity(unit, bus_id, None, (), 1 + counted.requests, note)
+    if sunspec is not None:
+        return Identity(unit, bus_id, sunspec, (), 1 + counted.requests)
     answers = await _fingerprint_answers(counted, unit, library, timeout)
     if answers is None:
         note = f"stopped: {counted.silent} reads went unanswered"

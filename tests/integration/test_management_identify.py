@@ -24,7 +24,7 @@ async def test_identify_over_mqtt_tells_the_units(mosquitto: Broker, tmp_path: P
         answer = await request(tester, "device/identify", {"units": "1-4", "timeout": 0.3})
         assert answer["status"] == "ok", answer
         data = answer["data"]
-        assert (data["bus"], data["probed"], data["max_requests_per_unit"]) == ("tcp", 4, 24)
+        assert (data["bus"], data["probed"], data["max_requests_per_unit"]) == ("tcp", 4, 47)
         found = {item["unit"]: item for item in data["found"]}
         assert sorted(found) == [1, 3]
         assert found[1]["matches"][0]["mapping"] == "nastec_vasco"

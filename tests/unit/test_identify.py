@@ -7,14 +7,11 @@ from pathlib import Path
 import yaml
 
 from bridge.config import load_config_data
-from bridge.core.entity import Table
 from bridge.core.fingerprint import MAX_PROBES, probe_read
 from bridge.core.identify import (
     MAX_MATCHES,
-    SUNS,
     Identity,
-    is_marker,
-    marker_read,
+    SunSpecDevice,
     probe_plan,
     rank,
     request_bound,
@@ -30,7 +27,8 @@ def test_every_shipped_mapping_has_a_fingerprint_and_the_plan_is_within_the_boun
     assert all(m.fingerprint is not None for m in LIBRARY.values())
     plan = probe_plan(LIBRARY)
     assert len(plan) == len(set(plan))
-    assert 1 + 3 + len(plan) <= request_bound(LIBRARY) == 1 + 3 + MAX_PROBES * 5 == 24
+    assert 1 + 3 + len(plan) <= request_bound(LIBRARY, 0, 3) == 1 + 3 + MAX_PROBES * 5 == 24
+    assert request_bound(LIBRARY, 46, 3) == 47  # a SunSpec walk may take more
 
 
 def test_a_read_two_mappings_share_is_planned_once() -> None:
@@ -79,12 +77,25 @@ def test_the_nastec_address_register_must_read_the_unit() -> None:
     assert all(m.mapping != "nastec_vasco" for m in rank(LIBRARY, 10, answers))
 
 
-def test_the_sunspec_marker() -> None:
-    assert marker_read(40000) == Read(Table.HOLDING, 40000, 2)
-    assert is_marker(SUNS)
-    assert is_marker((0x5375, 0x6E53, 1))
-    assert not is_marker((0x5375,))
-    assert not is_marker(None)
+def test_a_sunspec_device_is_described_by_its_common_model() -> None:
+    found = SunSpecDevice(40000, "SMA", "SB5.0", "1.2", "3001", (1, 101, 120, 160))
+    identity = Identity(3, "rs485", found, (), 17)
+    assert identity.best == "sunspec"
+    assert identity.summary() == (
+        "SunSpec device SMA SB5.0 (serial 3001; version 1.2; models 1, 101, 120, 160; "
+        "marker at 40000)"
+    )
+    assert identity.as_dict()["sunspec"] == {
+        "base": 40000,
+        "manufacturer": "SMA",
+        "model": "SB5.0",
+        "version": "1.2",
+        "serial_number": "3001",
+        "models": [1, 101, 120, 160],
+        "note": None,
+    }
+    bare = SunSpecDevice(0, note="model 7 at 2: more than 40 models")
+    assert bare.describe() == "SunSpec device unnamed (marker at 0)"
 
 
 def test_the_snippet_is_a_valid_device_entry() -> None:
@@ -104,9 +115,9 @@ def test_identity_json() -> None:
     assert document["config"] == snippet("tcp", 4, "soft_starter")
     assert document["matches"][0]["answers_like"] is True
     assert document["sunspec"] is None
-    sunspec = Identity(4, "tcp", 0, (), 3).as_dict()
-    assert sunspec["summary"] == "SunSpec device (marker at base 0)"
-    assert sunspec["sunspec"] == {"base": 0}
+    sunspec = Identity(4, "tcp", SunSpecDevice(0), (), 3).as_dict()
+    assert sunspec["summary"] == "SunSpec device unnamed (marker at 0)"
+    assert sunspec["sunspec"]["base"] == 0
     assert sunspec["config"] == snippet("tcp", 4, "sunspec")
     nothing = Identity(4, "tcp", None, (), 22, "stopped").as_dict()
     assert nothing["config"] is None
