@@ -154,6 +154,7 @@ def _references(mapping: MappingParts) -> Iterator[str]:
     }
     for key, e in entities.items():
         yield from _toggle_and_requires(mapping, key, e)
+        yield from _scale_source(mapping, key, e)
         for field_name, (kind, description) in wants.items():
             ref = getattr(e, field_name)
             if ref is None:
@@ -194,6 +195,30 @@ def _toggle_and_requires(mapping: MappingParts, key: str, e: Entity) -> Iterator
             yield f"entities.{key}.requires.{ref}: not one of {ref!r}'s labels"
         elif target.kind not in ("bool", "enum"):
             yield f"entities.{key}.requires: {ref!r} must be a boolean or an enum"
+
+
+def _scale_source(mapping: MappingParts, key: str, e: Entity) -> Iterator[str]:
+    """``scale_by`` names a readable whole s16 number of the same table, unscaled itself,
+    present whenever the scaled entity is."""
+    ref = e.scale_by
+    if ref is None:
+        return
+    target = mapping.entities.get(ref)
+    where = f"entities.{key}.scale_by"
+    if ref == key:
+        yield f"{where}: an entity cannot scale itself"
+    elif target is None:
+        yield f"{where}: no entity {ref!r}"
+    elif target.data_type is not DataType.S16 or target.kind != "number" or target.bit is not None:
+        yield f"{where}: {ref!r} must be a whole s16 number (a power-of-ten exponent)"
+    elif not target.readable:
+        yield f"{where}: {ref!r} must be readable"
+    elif target.table is not e.table:
+        yield f"{where}: {ref!r} must be on the same table ({e.table.value}), read with it"
+    elif target.scale != 1 or target.offset != 0 or target.scale_by is not None:
+        yield f"{where}: {ref!r} holds the exponent as it is: no scale, offset or scale_by"
+    elif not _implies(e.when, target.when, mapping):
+        yield f"{where}: {ref!r} is missing for some option values"
 
 
 def _state_link_problems(
@@ -261,28 +286,68 @@ def wide_keys(entities: AnyMapping[str, Entity]) -> list[str]:
 
 
 def _whole_reads(mapping: MappingParts) -> Iterator[str]:
-    """A 64-bit number where the device (or a segment) reads fewer than 4 registers."""
-    protocol, rule = mapping.protocol, mapping.protocol.addressing
+    """A 64-bit number where the device (or a segment) reads fewer than 4 registers; a
+    ``scale_by`` number and its exponent that one request cannot read together."""
     for key in wide_keys(mapping.entities):
         e = mapping.entities[key]
-        wire = to_wire(e.address, rule)
-        limits = [protocol.max_read_registers] + [
+        limit = _read_limit(mapping, e, to_wire(e.address, mapping.protocol.addressing))
+        if limit < e.register_count:
+            yield (
+                f"entities.{key}.type: a {e.data_type.value} is read whole, in one request of "
+                f"4 registers; the device reads at most {limit} there"
+            )
+    yield from _scaled_reads(mapping)
+
+
+def _scaled_reads(mapping: MappingParts) -> Iterator[str]:
+    rule = mapping.protocol.addressing
+    for key, e in mapping.entities.items():
+        source = mapping.entities.get(e.scale_by or "")
+        if source is None or not e.readable or source.table is not e.table:
+            continue
+        first, second = to_wire(e.address, rule), to_wire(source.address, rule)
+        start = min(first, second)
+        stop = max(first + e.register_count, second + source.register_count)
+        limit = min(_read_limit(mapping, e, first), _read_limit(mapping, e, second))
+        if stop - start > limit or _segment_index(mapping, e, first) != _segment_index(
+            mapping, e, second
+        ):
+            yield (
+                f"entities.{key}.scale_by: {e.scale_by!r} is read in the same request, "
+                f"{stop - start} registers from {start} (wire); the device reads at most "
+                f"{limit} there, within one segment"
+            )
+
+
+def _read_limit(mapping: MappingParts, e: Entity, wire: int) -> int:
+    """Registers one request may read at ``wire`` of the entity's table."""
+    protocol, rule = mapping.protocol, mapping.protocol.addressing
+    return min(
+        [protocol.max_read_registers]
+        + [
             s.max_read_registers
             for s in protocol.segments
             if s.table is e.table
             and s.max_read_registers is not None
             and to_wire(s.start, rule) <= wire <= to_wire(s.end, rule)
         ]
-        if min(limits) < e.register_count:
-            yield (
-                f"entities.{key}.type: a {e.data_type.value} is read whole, in one request of "
-                f"4 registers; the device reads at most {min(limits)} there"
-            )
+    )
+
+
+def _segment_index(mapping: MappingParts, e: Entity, wire: int) -> int:
+    rule = mapping.protocol.addressing
+    for index, s in enumerate(mapping.protocol.segments):
+        if s.table is e.table and to_wire(s.start, rule) <= wire <= to_wire(s.end, rule):
+            return index
+    return -1
 
 
 def _sentinels(mapping: MappingParts) -> Iterator[str]:
     for key, e in mapping.entities.items():
         top = _UNSIGNED_MAX.get(e.data_type, 0xFFFF)
+        if e.data_type is DataType.ASCII and set(e.sentinels) - {0}:
+            yield f"entities.{key}.sentinels: text takes only 0 (every register 0: no text)"
+            continue
         for raw in e.sentinels:
             if not 0 <= raw <= top:
                 yield f"entities.{key}.sentinels: {raw} is outside the raw range 0..{top}"

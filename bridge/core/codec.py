@@ -18,7 +18,7 @@ from collections.abc import Mapping as AnyMapping
 from collections.abc import Sequence
 from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
 
-from bridge.core.entity import DataType, Entity, Order, Table
+from bridge.core.entity import MAX_EXPONENT, DataType, Entity, Order, Table
 from bridge.core.mapping import Point
 from bridge.core.request import Write
 from bridge.errors import MissingDataError, ValueRejectedError, WriteForbiddenError
@@ -134,6 +134,8 @@ def decode(point: Point, image: Image) -> Value:
     words = words_of(point, image)
     kind = entity.data_type
     if kind is DataType.ASCII:
+        if 0 in entity.sentinels and not any(words):  # all zero: no text (SunSpec)
+            return None
         text = _to_bytes(words, entity.byte_order).decode("latin-1")
         return text.rstrip("\x00 ").lstrip("\x00")
     if kind is DataType.BOOL:
@@ -149,7 +151,19 @@ def decode(point: Point, image: Image) -> Value:
     raw = _integer(entity, unsigned)
     if entity.kind == "number" and point.sign is not None and decode(point.sign, image):
         raw = -raw
+    if point.scale_source is not None:
+        exponent = scale_exponent(point.scale_source, image)
+        return None if exponent is None else scale_value(entity, raw, True, exponent)
     return _finish(entity, raw)
+
+
+def scale_exponent(source: Point, image: Image) -> int | None:
+    """The power of ten a ``scale_by`` register holds (a SunSpec ``sunssf``), or None
+    when it is not one: 0x8000 (not implemented), a sentinel, beyond -10..10."""
+    exponent = decode(source, image)
+    if not isinstance(exponent, int) or isinstance(exponent, bool):
+        return None
+    return exponent if -MAX_EXPONENT <= exponent <= MAX_EXPONENT else None
 
 
 # struct format, bytes and the significant digits that always read back the same float
@@ -239,26 +253,77 @@ def _finish(entity: Entity, raw: int) -> Value:
     return scale_value(entity, raw, shaped=True)
 
 
-def scale_value(entity: Entity, raw: int, shaped: bool = False) -> int | float:
-    """raw * scale + offset, exact in decimal, as an int when the entity has no decimals;
+def scale_value(entity: Entity, raw: int, shaped: bool = False, exponent: int = 0) -> int | float:
+    """raw * 10**exponent * scale + offset, exact in decimal, as an int when the entity
+    has no decimals (``exponent``: a ``scale_by`` register's, which adds its own decimals);
     ``shaped``: clamped and zero-suppressed before rounding (a reading, not a range end)."""
-    exact = Decimal(raw) * Decimal(repr(entity.scale)) + Decimal(repr(entity.offset))
+    factor = _factor(entity, exponent)
+    exact = Decimal(raw) * factor + Decimal(repr(entity.offset))
     if shaped:
         exact = _shaped(entity, exact)
-    if entity.decimals == 0:
+    decimals = entity.decimals if exponent == 0 else scaled_decimals(entity, exponent)
+    if decimals == 0:
         return int(exact.to_integral_value(ROUND_HALF_UP))
-    return float(round(exact, entity.decimals))
+    return float(round(exact, decimals))
 
 
-def unscale_value(entity: Entity, value: float) -> int:
-    """(value - offset) / scale rounded half away from zero: 4.5 bar at 0.1 -> 45, not 44.
-    An integer is taken exactly (a 64-bit value beyond a float's 53 bits)."""
+def scaled_decimals(entity: Entity, exponent: int) -> int:
+    """Decimals of a ``scale_by`` value at this exponent: ``precision`` when given, else
+    those of scale x 10**exponent and of offset (sf -2, scale 1: two)."""
+    if entity.precision is not None:
+        return entity.precision
+    return max(_places(_factor(entity, exponent)), _places(Decimal(repr(entity.offset))))
+
+
+def decimals_of(point: Point, image: Image) -> int | None:
+    """The decimals ``point``'s value is published with: fixed by the mapping, or for a
+    ``scale_by`` value those of the exponent in ``image`` (None while it is unknown)."""
+    source = point.scale_source
+    if source is None:
+        return point.entity.decimals
+    try:
+        exponent = scale_exponent(source, image)
+    except MissingDataError:
+        exponent = None
+    return None if exponent is None else scaled_decimals(point.entity, exponent)
+
+
+def _places(number: Decimal) -> int:
+    """Decimals ``number`` needs: 0.01 two, 100 none."""
+    return max(0, -int(number.normalize().as_tuple().exponent))
+
+
+def _factor(entity: Entity, exponent: int) -> Decimal:
+    return Decimal(repr(entity.scale)).scaleb(exponent)
+
+
+def unscale_value(entity: Entity, value: float, exponent: int = 0) -> int:
+    """(value - offset) / (scale * 10**exponent) rounded half away from zero: 4.5 bar at
+    0.1 -> 45, not 44. An integer is taken exactly (a 64-bit value beyond a float's 53 bits)."""
     given = Decimal(value) if isinstance(value, int) else Decimal(repr(float(value)))
     try:
-        exact = (given - Decimal(repr(entity.offset))) / Decimal(repr(entity.scale))
+        exact = (given - Decimal(repr(entity.offset))) / _factor(entity, exponent)
     except InvalidOperation:
         raise ValueRejectedError(f"{_shown(value)} is not a finite number") from None
     return int(exact.to_integral_value(ROUND_HALF_UP))
+
+
+def _write_exponent(point: Point, image: Image) -> int:
+    """The exponent a write of ``point`` is encoded with: its ``scale_by`` register as
+    last read (0 without one); ValueRejectedError when it is unknown or not read."""
+    source = point.scale_source
+    if source is None:
+        return 0
+    try:
+        exponent = scale_exponent(source, image)
+    except MissingDataError:
+        exponent = None
+    if exponent is None:
+        raise ValueRejectedError(
+            f"{point.key}: its scale factor {source.key} is unknown (not read, not "
+            f"implemented or beyond -{MAX_EXPONENT}..{MAX_EXPONENT}): nothing written"
+        )
+    return exponent
 
 
 def unit_of(point: Point, image: Image) -> str | None:
@@ -365,7 +430,7 @@ def _raw_for(point: Point, value: object, image: Image) -> int:
             return entity.words.write_on if on else entity.words.write_off
         return int(on)
     number = _number(point, value, image)
-    raw = unscale_value(entity, number)
+    raw = unscale_value(entity, number, _write_exponent(point, image))
     low, high = raw_bounds(entity)
     magnitude_low = -high if point.sign is not None else low
     if not magnitude_low <= raw <= high:

@@ -72,11 +72,13 @@ class CounterRule:
 
     @classmethod
     def of(cls, point: Point, confirm: int | None = None) -> CounterRule:
-        """The rule of a mapping point: width from its type, step from its scale."""
+        """The rule of a mapping point: width from its type, step from its scale (a
+        ``scale_by`` counter's step moves with its exponent: no rollover is continued)."""
         entity = point.entity
         lsb = abs(entity.scale) or 1.0
         width = counter_width(point)
-        wrap = width * lsb if width and not entity.offset else None
+        fixed = not entity.offset and point.scale_source is None
+        wrap = width * lsb if width and fixed else None
         return cls(confirm=confirm or CONFIRM, wrap=wrap, lsb=lsb)
 
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from datetime import datetime
 
-from bridge.core.codec import Value, decode
+from bridge.core.codec import Value, decimals_of, decode
 from bridge.core.counters import Kind, Reading, counters_of
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Mapping, Point, printed_address
@@ -74,6 +74,8 @@ class DeviceState:
         self.timing = timing
         self.image: dict[Address, int] = {}
         self.read_at: dict[Address, float] = {}  # when each word of the image was read or written
+        self.request_of: dict[Address, int] = {}  # the request each word read came in (numbered)
+        self.requests = 0
         self.values: dict[str, Value] = {}
         self.counters = counters_of(self.points.values(), confirm)
         self.counter_news: list[tuple[str, Reading]] = []  # held, wrapped, reset readings
@@ -126,8 +128,7 @@ class DeviceState:
             keys = tuple(
                 k
                 for k, p in self.points.items()
-                if self.intervals[k] in chosen
-                or (p.entity.readable and {(p.table, a) for a in p.span} <= covered)
+                if self.intervals[k] in chosen or (p.entity.readable and p.footprint <= covered)
             )
             self._plans[chosen] = (reads, keys)
         return self._plans[chosen]
@@ -171,8 +172,10 @@ class DeviceState:
     def keep(self, read: Read, values: tuple[int, ...], fresh: set[Address]) -> frozenset[Address]:
         """Put a read's answer in the image (and its addresses in ``fresh``); return the
         addresses it had refused before (now readable: the plans are made again)."""
+        self.requests += 1
         for address, value in zip(read.span, values, strict=True):
             self.image[(read.table, address)] = value
+            self.request_of[(read.table, address)] = self.requests
             fresh.add((read.table, address))
         back = self.refusals.answer(addresses_of(read))
         if back:
@@ -180,8 +183,12 @@ class DeviceState:
         return back
 
     def store(self, write: Write) -> None:
-        """What the device acknowledged writing goes in the image."""
-        self.image.update(stored(write))
+        """What the device acknowledged writing goes in the image (words no request read:
+        a ``scale_by`` value waits for its read back, with its exponent)."""
+        cells = stored(write)
+        self.image.update(cells)
+        for cell in cells:
+            self.request_of.pop(cell, None)
 
     def stamp(self, cells: Iterable[Address], now: float) -> None:
         """The words of ``cells`` in the image are as the device held them at ``now``
@@ -191,17 +198,21 @@ class DeviceState:
 
     def decode_fresh(self, keys: Iterable[str], fresh: set[Address]) -> frozenset[str]:
         """Decode the readable ``keys`` whose registers are all in ``fresh`` (refused ones
-        become None); return the keys whose value changed. The others keep their value."""
+        become None); return the keys whose value changed. The others keep their value.
+        A ``scale_by`` value needs its exponent's register fresh too, read in the same
+        request (the planner never reads them apart): never with another read's exponent."""
         changed: set[str] = set()
         refused = self.refusals.refused
         for key in keys:
             point = self.points[key]
             if not point.entity.readable:
                 continue
-            span = point.addresses
+            span = point.footprint
             if not span.isdisjoint(refused):
                 value: Value = None
             elif span <= fresh:
+                if point.scale_source is not None and not self._one_request(point):
+                    continue
                 try:
                     value = decode(point, self.image)
                 except MissingDataError:
@@ -214,11 +225,16 @@ class DeviceState:
                     self.counter_news.append((key, reading))
                 if not reading.published:
                     continue  # held: the published value stays
-                value = _counted(point, value, reading)
+                value = _counted(value, reading, decimals_of(point, self.image))
             if key not in self.values or self.values[key] != value:
                 changed.add(key)
             self.values[key] = value
         return frozenset(changed)
+
+    def _one_request(self, point: Point) -> bool:
+        """Every word of the point and its exponent came in one request."""
+        requests = {self.request_of.get(cell) for cell in point.footprint}
+        return len(requests) == 1 and None not in requests
 
     # --- counters ------------------------------------------------------------------------
 
@@ -286,14 +302,15 @@ class DeviceState:
         )
 
 
-def _counted(point: Point, read: Value, reading: Reading) -> Value:
+def _counted(read: Value, reading: Reading, decimals: int | None) -> Value:
     """What a counter publishes: the value as decoded on a plain rise, else the counter's
-    value (a rollover's continuation, a reset) in the decoded value's type and decimals."""
+    value (a rollover's continuation, a reset) in the decoded value's type and decimals
+    (``decimals``: the point's, a ``scale_by`` value's at the exponent it was read with)."""
     if reading.kind in (Kind.FIRST, Kind.RISE) or reading.value is None:
         return read
     if isinstance(read, int) and float(reading.value).is_integer():
         return int(reading.value)
-    return round(reading.value, point.entity.decimals)
+    return reading.value if decimals is None else round(reading.value, decimals)
 
 
 def _is_time(text: object) -> bool:

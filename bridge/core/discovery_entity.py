@@ -39,7 +39,7 @@ from bridge.core.codec import (
     raw_bounds,
     scale_value,
 )
-from bridge.core.entity import Component, Entity, PollClass, StateLink
+from bridge.core.entity import MAX_EXPONENT, Component, Entity, PollClass, StateLink
 from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
 from bridge.core.mapping import Point
 from bridge.core.topics import Topics
@@ -305,7 +305,10 @@ def numeric_sensor_options(key: str, entity: Entity, context: ComponentContext) 
         config["unit_of_measurement"] = unit
     if entity.ha.display_precision is not None:
         config["suggested_display_precision"] = entity.ha.display_precision
-    elif not entity.data_type.is_float:  # a float has no fixed decimals
+    elif not entity.data_type.is_float and (
+        entity.scale_by is None or entity.precision is not None
+    ):
+        # a float has no fixed decimals, nor a value scaled by a register (scale_by)
         config["suggested_display_precision"] = entity.decimals
     return config
 
@@ -345,7 +348,7 @@ def _number(key: str, entity: Entity, context: ComponentContext) -> Config:
     config = _command(key, entity, context) | {
         "min": low,
         "max": high,
-        "step": entity.step if entity.step is not None else abs(entity.scale),
+        "step": _step(entity),
         "mode": entity.ha.mode or "box",
     }
     unit = unit_of(key, entity, context)
@@ -366,7 +369,13 @@ def number_range(key: str, entity: Entity, context: ComponentContext) -> tuple[f
         ends = [entity.offset - top, entity.offset + top]
     else:
         raw_low, raw_high = raw_bounds(entity)
-        ends = sorted((scale_value(entity, raw_low), scale_value(entity, raw_high)))
+        power = MAX_EXPONENT if entity.scale_by is not None else 0  # any exponent it may read
+        ends = sorted(
+            (
+                scale_value(entity, raw_low, exponent=power),
+                scale_value(entity, raw_high, exponent=power),
+            )
+        )
     if entity.sign_from is not None:
         ends = [-ends[1], ends[1]]
     static = (
@@ -460,3 +469,14 @@ _BUILDERS: dict[Component, Callable[[str, Entity, ComponentContext], Config]] = 
     Component.BUTTON: _button,
     Component.TEXT: _text,
 }
+
+
+def _step(entity: Entity) -> float:
+    """A number's step: ``step``, else its scale; a ``scale_by`` value without ``step``
+    takes its ``precision``'s (else Home Assistant's finest, 0.001): the bridge rounds
+    to the exponent the device holds when it writes."""
+    if entity.step is not None:
+        return entity.step
+    if entity.scale_by is None:
+        return abs(entity.scale)
+    return 10.0 ** -min(entity.precision if entity.precision is not None else 3, 3)

@@ -79,6 +79,7 @@ class PollClass(StrEnum):
     ONCE = "once"
 
 
+MAX_EXPONENT = 10  # a scale_by exponent beyond +-10 (0x8000: not implemented) reads unknown
 MIN_INTERVAL = 0.1  # seconds: the shortest own interval (a bus answers in tens of ms)
 MAX_INTERVAL = 31 * 86400.0  # seconds: 31 days, the longest own interval (a weekly read fits)
 
@@ -318,6 +319,12 @@ class Entity(BaseModel):
     bit: int | None = Field(None, ge=0, le=15, description="lowest bit of a bit/nibble field")
     width: int | None = Field(None, ge=1, le=16, description="bits in the field (default 1)")
     scale: float = 1.0
+    scale_by: str | None = Field(
+        None,
+        description="key of an s16 entity of the same table holding a power-of-ten exponent "
+        "(a SunSpec sunssf): value = raw x 10**exponent x scale + offset, both read in one "
+        "request; an exponent outside -10..10 (0x8000: not implemented) reads unknown",
+    )
     offset: float = 0.0
     precision: int | None = Field(None, ge=0, le=6, description="decimals; default from scale")
     unit: str | None = None
@@ -591,6 +598,10 @@ def _check_numeric(e: Entity) -> str | None:
         return "scale cannot be 0"
     if scaled and e.kind != "number":
         return f"scale/offset apply to numbers, not to {e.kind} values"
+    if e.scale_by is not None and (e.kind != "number" or e.data_type.is_float):
+        return "scale_by scales an integer number (not a float, text, enum or boolean)"
+    if e.scale_by is not None and e.dangerous_below is not None:
+        return "dangerous_below is judged on a fixed scale: not with scale_by"
     if e.min is not None and e.max is not None and e.min > e.max:
         return f"min {e.min} is above max {e.max}"
     if e.sign_from and e.data_type is not DataType.U16:

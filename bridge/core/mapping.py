@@ -124,6 +124,7 @@ class Mapping(BaseModel):
                 min_source=plain.get(e.min_from or ""),
                 max_source=plain.get(e.max_from or ""),
                 state_source=plain.get(e.toggle_of or ""),
+                scale_source=plain.get(e.scale_by or ""),
             )
         return resolved
 
@@ -143,12 +144,18 @@ class Point:
     min_source: Point | None = field(default=None, repr=False)
     max_source: Point | None = field(default=None, repr=False)
     state_source: Point | None = field(default=None, repr=False)  # what a toggle flips
+    scale_source: Point | None = field(default=None, repr=False)  # its exponent (scale_by)
     # (table, wire address) of each register: worked out once, asked at every decode
     addresses: frozenset[tuple[Table, int]] = field(init=False, repr=False, compare=False)
+    # the registers a decode reads: its own and its scale_by exponent's, read in one request
+    footprint: frozenset[tuple[Table, int]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         span = range(self.address, self.address + self.entity.register_count)
-        object.__setattr__(self, "addresses", frozenset((self.entity.table, a) for a in span))
+        own = frozenset((self.entity.table, a) for a in span)
+        object.__setattr__(self, "addresses", own)
+        extra = self.scale_source.addresses if self.scale_source is not None else frozenset()
+        object.__setattr__(self, "footprint", own | extra)
 
     @property
     def table(self) -> Table:
@@ -161,6 +168,15 @@ class Point:
     @property
     def span(self) -> range:
         return range(self.address, self.address + self.count)
+
+    @property
+    def extent(self) -> range:
+        """The registers one request reads for this point: its span, or with ``scale_by``
+        everything from the first to the last register of it and its exponent."""
+        source = self.scale_source
+        if source is None:
+            return self.span
+        return range(min(self.address, source.address), max(self.span.stop, source.span.stop))
 
 
 def _plain_point(key: str, entity: Entity, protocol: Protocol) -> Point:

@@ -13,7 +13,10 @@ it is longer than that max (Nastec: one register per read): it is then cut into 
 registers that group like any other atoms, which reads it in limit-sized chunks from its
 first register (the 6-register Nastec MAC address takes six reads). A 64-bit number is
 never cut (no tear check joins four words): where reads are shorter (a limit learnt from
-the device) it is left out, named in ``Plan.unplannable``.
+the device) it is left out, named in ``Plan.unplannable``. Nor is a ``scale_by`` number
+ever read apart from its exponent register: its atom runs from the first to the last
+register of the two (``Point.extent``), so a value is never scaled by another read's
+exponent; where no read can hold both it is left out and named the same way.
 
 ``plan_reads`` is exact: dynamic programming over the sorted atoms of each table (blocks
 are contiguous runs of atoms; reading an atom twice never pays). A hole is read through
@@ -189,30 +192,54 @@ def plan_reads(points: Iterable[Point], limits: ReadLimits) -> Plan:
     reads: list[Read] = []
     unplannable: set[str] = set()
     for table in sorted({p.table for p in readable}):
-        units, lost = _units(table, [p for p in readable if p.table is table], limits)
+        units, lost = _units(table, [p for p in readable if p.table is table], limits, defined)
         unplannable |= lost
         reads += _plan_table(table, units, limits, defined)
     return Plan(tuple(reads), tuple(sorted(unplannable)))
 
 
 def _units(
-    table: Table, points: Sequence[Point], limits: ReadLimits
+    table: Table, points: Sequence[Point], limits: ReadLimits, defined: frozenset[Address]
 ) -> tuple[list[_Unit], set[str]]:
     """The DP units of one table's points, and the keys of points no read can fetch."""
     lost = {p.key for p in points if any((table, a) in limits.unreadable for a in p.span)}
     lost |= {p.key for p in points if _wide(p) and _too_long(table, p, limits)}
-    units: list[_Unit] = []
-    for start, stop, keys in _atoms(p for p in points if p.key not in lost):
-        place = _region(table, start, stop, limits)
-        if place is None:
-            lost.update(keys)
-            continue
-        region, limit = place
-        if stop - start <= limit:
-            units.append(_Unit(start, stop, region, limit))
-        else:
+    lost |= {p.key for p in points if not _scaled_readable(table, p, limits, defined)}
+    while True:
+        units: list[_Unit] = []
+        cut: set[str] = set()
+        for start, stop, keys in _atoms(p for p in points if p.key not in lost):
+            place = _region(table, start, stop, limits)
+            if place is None:
+                cut.update(keys)
+                continue
+            region, limit = place
+            if stop - start <= limit:
+                units.append(_Unit(start, stop, region, limit))
+                continue
+            whole = [p for p in points if p.key in keys and p.scale_source is not None]
+            if whole:  # a value and its exponent are never read apart: the farthest left out
+                lost.add(max(whole, key=lambda p: (len(p.extent), p.key)).key)
+                break
             units += [_Unit(a, a + 1, region, limit) for a in range(start, stop)]
-    return units, lost
+        else:
+            return units, lost | cut
+
+
+def _scaled_readable(
+    table: Table, point: Point, limits: ReadLimits, defined: frozenset[Address]
+) -> bool:
+    """A ``scale_by`` point: one request may read it with its exponent (every register
+    between them readable, inside one segment and the max count)."""
+    if point.scale_source is None:
+        return True
+    extent = point.extent
+    if any((table, a) in limits.unreadable for a in extent):
+        return False
+    if not limits.readable_gaps and any((table, a) not in defined for a in extent):
+        return False
+    place = _region(table, extent.start, extent.stop, limits)
+    return place is not None and len(extent) <= place[1]
 
 
 def _wide(point: Point) -> bool:
@@ -226,15 +253,16 @@ def _too_long(table: Table, point: Point, limits: ReadLimits) -> bool:
 
 
 def _atoms(points: Iterable[Point]) -> list[tuple[int, int, tuple[str, ...]]]:
-    """Points of one table merged where they share a register: (start, stop, keys)."""
+    """Points of one table merged where they share a register: (start, stop, keys). A
+    ``scale_by`` point spans its exponent's register too (``Point.extent``): read whole."""
     atoms: list[tuple[int, int, tuple[str, ...]]] = []
-    for p in sorted(points, key=lambda p: (p.address, p.count, p.key)):
-        stop = p.address + p.count
-        if atoms and p.address < atoms[-1][1]:
+    for p in sorted(points, key=lambda p: (p.extent.start, len(p.extent), p.key)):
+        start, stop = p.extent.start, p.extent.stop
+        if atoms and start < atoms[-1][1]:
             first, last, keys = atoms[-1]
             atoms[-1] = (first, max(last, stop), (*keys, p.key))
         else:
-            atoms.append((p.address, stop, (p.key,)))
+            atoms.append((start, stop, (p.key,)))
     return atoms
 
 
@@ -379,7 +407,9 @@ def split_read(read: Read, points: Iterable[Point], *, halves: bool = False) -> 
 
 def holes(read: Read, points: Iterable[Point]) -> frozenset[Address]:
     """The addresses of ``read`` that no readable point needs."""
-    needed = {a for p in points if p.entity.readable and p.table is read.table for a in p.span}
+    needed = {
+        a for p in points if p.entity.readable and p.table is read.table for _, a in p.footprint
+    }
     return frozenset((read.table, a) for a in read.span if a not in needed)
 
 

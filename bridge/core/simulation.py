@@ -211,8 +211,12 @@ def _rank(point: Point, order: dict[str, int]) -> tuple[int, int, int]:
 
 
 def _limit_roles(points: AnyMapping[str, Point]) -> dict[str, str]:
+    """Keys that hold another's limit (``min``, ``max``) or exponent (``scale``: 0, so the
+    values it scales read as they are; it never moves)."""
     roles: dict[str, str] = {}
     for point in points.values():
+        if point.scale_source is not None:
+            roles[point.scale_source.key] = "scale"
         if point.max_source is not None:
             roles[point.max_source.key] = "max"
         if point.min_source is not None:
@@ -229,6 +233,8 @@ def _initial_value(point: Point, is_status: bool, role: str) -> Value:
     if entity.kind == "bool":
         words = point.key.split("_")
         return not entity.alarm and (is_status or any(word in words for word in _TRUE_WORDS))
+    if role == "scale":
+        return 0
     low, high = number_range(point)
     value = _plausible_number(point, low, high) * {"min": 0.5, "max": 2.0}.get(role, 1.0)
     return round(min(max(value, low), high), entity.decimals)

@@ -18,9 +18,16 @@ Address = tuple[Table, int]
 def dependencies(point: Point, required: list[Point]) -> list[Read]:
     """What a write of ``point`` must read fresh first: the word of a bit field (even of a
     write-only bit), a sign register, limit registers, an EEPROM parameter's current value,
-    the state a toggle flips, the values it ``requires``."""
+    the state a toggle flips, the values it ``requires``, the exponent of a ``scale_by``
+    value (encoded with the device's exponent of now)."""
     entity = point.entity
-    linked = (point.sign, point.min_source, point.max_source, point.state_source)
+    linked = (
+        point.sign,
+        point.min_source,
+        point.max_source,
+        point.state_source,
+        point.scale_source,
+    )
     sources = [p for p in linked if p is not None] + required
     reads = [Read(p.table, p.address, p.count) for p in sources]
     if entity.field_width is not None or (entity.eeprom and entity.readable):

@@ -10,6 +10,7 @@ through ``bridge.core.state``. Nothing here touches a bus or waits.
                 latency_p50_ms, latency_p95_ms, requests, errors, timeouts, backoff_s}
     device     summary + {topic, values: [value]}
     value      {key, name, value, unit, decimals, alarm, component, category, writable}
+               (decimals null: not known yet, a scale_by value's exponent unread)
     values     {device, status, alarms, values: {key: value}}  (the keys that changed)
 
 Bus utilisation and request rates cover the last ``WINDOW`` seconds (``BusWindow``).
@@ -21,7 +22,7 @@ from collections import deque
 from collections.abc import Iterable
 from typing import Any
 
-from bridge.core.codec import unit_of
+from bridge.core.codec import decimals_of, unit_of
 from bridge.core.health_report import Snapshot, build_health_report
 from bridge.core.state import active_alarms, alarm_active, published
 from bridge.modbus.poller import DevicePoller
@@ -102,7 +103,7 @@ def value_row(poller: DevicePoller, key: str) -> dict[str, Any]:
         "name": entity.name,
         "value": value,
         "unit": unit_of(point, poller.image),
-        "decimals": entity.decimals,
+        "decimals": decimals_of(point, poller.image),
         "alarm": alarm_active(point, value),
         "component": entity.component.value,
         "category": entity.ha.entity_category,
