@@ -10,8 +10,9 @@ from dataclasses import dataclass
 TABLES = frozenset({"input", "holding"})
 TYPES = frozenset({"f32", "u16", "s16", "u32", "s32", "u64", "s64"})
 WORD_ORDERS = frozenset({"big", "little"})
+# "°" (phase angle) is added to lib37's list: mbmd reads SDM phase angles in degrees
 UNITS = frozenset(
-    {"V", "A", "W", "kW", "VA", "kVA", "var", "kvar", "Hz", "kWh", "Wh", "kvarh", "%", ""}
+    {"V", "A", "W", "kW", "VA", "kVA", "var", "kvar", "Hz", "kWh", "Wh", "kvarh", "%", "", "°"}
 )
 _WIDTHS = {"u16": 1, "s16": 1, "f32": 2, "u32": 2, "s32": 2, "u64": 4, "s64": 4}
 

@@ -3,5 +3,10 @@
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition
+from tests.library.sources import eastron
 
-SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
+_MODULES = (eastron,)
+
+SOURCES: dict[str, tuple[SourceDefinition, ...]] = {
+    device: definitions for module in _MODULES for device, definitions in module.DEFINITIONS.items()
+}
