@@ -23,6 +23,7 @@ DEVICES = frozenset(
         "eastron_sdm120",
         "eastron_sdm230",
         "eastron_sdm72d_m",
+        "abb_b23",
     }
 )
 SOURCE_NAMES = re.compile(r"^(mbmd|evcc|vendor|ha-community:[\w.-]+/[\w.-]+)$")

@@ -6,24 +6,19 @@ All SDM values are IEEE 754 float32, high word first, in input registers, at sca
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition, SourcePoint
-
-MBMD = "volkszaehler/mbmd@fb8f9c22f1210740ac89064fb55610613bba3f78"
-EVCC = "evcc-io/evcc@b29b49e3056ead3c99ff1f4711b2bb17083114b0"
-EVCC_PINS_MBMD = (
-    "evcc's go.mod pins volkszaehler/mbmd at 96221ccf34be, which is not in the stored "
-    "snapshot; the registers evcc reads are transcribed from mbmd at fb8f9c22"
+from tests.library.sources.upstream import (
+    EVCC,
+    EVCC_3P,
+    EVCC_NAN,
+    EVCC_PINS_MBMD,
+    EVCC_PV,
+    MBMD,
+    pick,
 )
-EVCC_PV = "with usage pv evcc negates power (and phase values) and swaps import/export"
-EVCC_NAN = "evcc's mbmd meter reports a NaN reading as 0"
 
 
 def _f32(key: str, address: int, unit: str, name: str) -> SourcePoint:
     return SourcePoint(key, "input", address, "f32", unit, name=name)
-
-
-def _pick(points: tuple[SourcePoint, ...], keys: tuple[str, ...]) -> tuple[SourcePoint, ...]:
-    by_key = {p.key: p for p in points}
-    return tuple(by_key[k] for k in keys)
 
 
 # meters/rs485/sdm.go (producer "SDM", described as the SDM630 map)
@@ -155,21 +150,6 @@ MBMD_SDM72V2 = (
     _f32("reactive_energy_total", 0x0158, "kvarh", "ReactiveSum"),
 )
 
-# what evcc's mbmd-based three-phase templates read (power, energy, return energy, phases)
-_EVCC_3P = (
-    "power",
-    "energy_import",
-    "energy_export",
-    "current_l1",
-    "current_l2",
-    "current_l3",
-    "power_l1",
-    "power_l2",
-    "power_l3",
-    "voltage_l1",
-    "voltage_l2",
-    "voltage_l3",
-)
 
 SDM630 = (
     SourceDefinition(
@@ -186,7 +166,7 @@ SDM630 = (
         device="eastron_sdm630",
         source="evcc",
         ref=f"{EVCC}:templates/definition/meter/eastron-sdm72v2_630.yaml",
-        points=_pick(MBMD_SDM630, _EVCC_3P),
+        points=pick(MBMD_SDM630, EVCC_3P),
         notes=("evcc delegates to mbmd (type mbmd, model sdm)", EVCC_PINS_MBMD, EVCC_PV, EVCC_NAN),
     ),
 )
@@ -252,7 +232,7 @@ SDM72D_M = (
         device="eastron_sdm72d_m",
         source="evcc",
         ref=f"{EVCC}:templates/definition/meter/eastron-sdm72v2_630.yaml",
-        points=_pick(MBMD_SDM630, _EVCC_3P),
+        points=pick(MBMD_SDM630, EVCC_3P),
         notes=(
             "evcc lists the SDM72DM-V2 under its SDM630 template and reads it with mbmd's "
             "SDM630 producer (model sdm, meters/rs485/sdm.go), not mbmd's sdm72v2",
