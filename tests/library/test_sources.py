@@ -24,6 +24,12 @@ DEVICES = frozenset(
         "eastron_sdm230",
         "eastron_sdm72d_m",
         "abb_b23",
+        "carlo_gavazzi_em24",
+        "carlo_gavazzi_em340",
+        "chint_dtsu666",
+        "chint_ddsu666",
+        "orno_we514",
+        "orno_we516",
     }
 )
 SOURCE_NAMES = re.compile(r"^(mbmd|evcc|vendor|ha-community:[\w.-]+/[\w.-]+)$")

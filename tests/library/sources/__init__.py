@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition
-from tests.library.sources import abb, eastron
+from tests.library.sources import abb, carlo_gavazzi, chint, eastron, orno
 
-_MODULES = (eastron, abb)
+_MODULES = (eastron, abb, carlo_gavazzi, chint, orno)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {
     device: definitions for module in _MODULES for device, definitions in module.DEFINITIONS.items()

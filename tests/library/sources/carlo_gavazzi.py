@@ -1,0 +1,142 @@
+"""Carlo Gavazzi EM24 and EM340 as volkszaehler/mbmd and evcc-io/evcc read them (facts only).
+
+Input registers; 32-bit values signed, low word first; mbmd divides by a scaler
+(scale = 1/scaler).
+"""
+
+from __future__ import annotations
+
+from tests.library.source import SourceDefinition, SourcePoint
+from tests.library.sources.upstream import (
+    EVCC,
+    EVCC_3P,
+    EVCC_NAN,
+    EVCC_PINS_MBMD,
+    EVCC_PV,
+    MBMD,
+    pick,
+)
+
+
+def _s32(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
+    return SourcePoint(key, "input", address, "s32", unit, scale, "little", name)
+
+
+def _s16(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
+    return SourcePoint(key, "input", address, "s16", unit, scale, name=name)
+
+
+# meters/rs485/carlogavazzi-em24.go (producer CGEM24: the RS-485 EM24)
+MBMD_EM24 = (
+    _s32("voltage_l1", 0x00, "V", 0.1, "VoltageL1"),
+    _s32("voltage_l2", 0x02, "V", 0.1, "VoltageL2"),
+    _s32("voltage_l3", 0x04, "V", 0.1, "VoltageL3"),
+    _s32("current_l1", 0x0C, "A", 0.001, "CurrentL1"),
+    _s32("current_l2", 0x0E, "A", 0.001, "CurrentL2"),
+    _s32("current_l3", 0x10, "A", 0.001, "CurrentL3"),
+    _s32("power_l1", 0x12, "W", 0.1, "PowerL1"),
+    _s32("power_l2", 0x14, "W", 0.1, "PowerL2"),
+    _s32("power_l3", 0x16, "W", 0.1, "PowerL3"),
+    _s32("power", 0x28, "W", 0.1, "Power"),
+    _s16("power_factor_l1", 0x32, "", 0.001, "CosphiL1"),
+    _s16("power_factor_l2", 0x33, "", 0.001, "CosphiL2"),
+    _s16("power_factor_l3", 0x34, "", 0.001, "CosphiL3"),
+    _s16("power_factor", 0x35, "", 0.001, "Cosphi"),
+    _s16("frequency", 0x37, "Hz", 0.1, "Frequency"),
+    _s32("energy_import", 0x42, "kWh", 0.1, "Import"),
+    _s32("energy_import_l1", 0x46, "kWh", 0.1, "ImportL1"),
+    _s32("energy_import_l2", 0x48, "kWh", 0.1, "ImportL2"),
+    _s32("energy_import_l3", 0x4A, "kWh", 0.1, "ImportL3"),
+    _s32("energy_export", 0x5C, "kWh", 0.1, "Export"),
+)
+
+# meters/rs485/carlogavazzi-ex3x0.go (producer CGEX3X0: EM330, EM340, ET330, ET340)
+MBMD_EX3X0 = (
+    _s32("voltage_l1", 0x00, "V", 0.1, "VoltageL1"),
+    _s32("voltage_l2", 0x02, "V", 0.1, "VoltageL2"),
+    _s32("voltage_l3", 0x04, "V", 0.1, "VoltageL3"),
+    _s32("current_l1", 0x0C, "A", 0.001, "CurrentL1"),
+    _s32("current_l2", 0x0E, "A", 0.001, "CurrentL2"),
+    _s32("current_l3", 0x10, "A", 0.001, "CurrentL3"),
+    _s32("power_l1", 0x12, "W", 0.1, "PowerL1"),
+    _s32("power_l2", 0x14, "W", 0.1, "PowerL2"),
+    _s32("power_l3", 0x16, "W", 0.1, "PowerL3"),
+    _s32("power", 0x28, "W", 0.1, "Power"),
+    _s16("power_factor_l1", 0x2E, "", 0.001, "CosphiL1"),
+    _s16("power_factor_l2", 0x2F, "", 0.001, "CosphiL2"),
+    _s16("power_factor_l3", 0x30, "", 0.001, "CosphiL3"),
+    _s16("power_factor", 0x31, "", 0.001, "Cosphi"),
+    _s16("frequency", 0x33, "Hz", 0.1, "Frequency"),
+    _s32("energy_import", 0x34, "kWh", 0.1, "Import"),
+    _s32("energy_import_l1", 0x40, "kWh", 0.1, "ImportL1"),
+    _s32("energy_import_l2", 0x42, "kWh", 0.1, "ImportL2"),
+    _s32("energy_import_l3", 0x44, "kWh", 0.1, "ImportL3"),
+    _s32("energy_export", 0x4E, "kWh", 0.1, "Export"),
+)
+
+_MBMD_NOTE = "mbmd reads each value on its own (function 4), never in blocks"
+_EVCC_EM24 = tuple(k for k in EVCC_3P if k != "energy_export")
+
+EM24 = (
+    SourceDefinition(
+        device="carlo_gavazzi_em24",
+        source="mbmd",
+        ref=f"{MBMD}:meters/rs485/carlogavazzi-em24.go",
+        points=MBMD_EM24,
+        notes=(
+            _MBMD_NOTE,
+            "energy counters are read as signed 32-bit (low word first)",
+            "mbmd has a second producer for the Ethernet EM24_E1 "
+            "(meters/rs485/carlogavazzi-em24_e1.go) whose map differs from 0x2e on: "
+            "power factor L1..L3/total 0x2e..0x31, frequency 0x33, import 0x34, "
+            "import L1..L3 0x40/0x42/0x44, export 0x4e (the EM340 map below)",
+        ),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em24",
+        source="evcc",
+        ref=f"{EVCC}:templates/definition/meter/cg-em24.yaml",
+        points=pick(MBMD_EM24, _EVCC_EM24),
+        notes=(
+            "evcc delegates to mbmd (type mbmd, model cgem24); EM24 with RS-485 only, "
+            "evcc has a separate cg-em24_e1 template (model cgem24_e1) for the Ethernet EM24",
+            "evcc no longer reads export energy 0x5c (evcc-io/evcc PR 31736, issue 31143): "
+            "some EM24 variants/configurations answer exception 2 for it",
+            EVCC_PINS_MBMD,
+            EVCC_PV,
+            EVCC_NAN,
+        ),
+    ),
+)
+
+EM340 = (
+    SourceDefinition(
+        device="carlo_gavazzi_em340",
+        source="mbmd",
+        ref=f"{MBMD}:meters/rs485/carlogavazzi-ex3x0.go",
+        points=MBMD_EX3X0,
+        notes=(
+            _MBMD_NOTE,
+            "one producer for EM330, EM340, ET330 and ET340",
+            "energy counters are read as signed 32-bit (low word first)",
+        ),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em340",
+        source="evcc",
+        ref=f"{EVCC}:templates/definition/meter/cg-emt3xx.yaml",
+        points=pick(MBMD_EX3X0, EVCC_3P),
+        notes=(
+            "evcc delegates to mbmd (type mbmd, model cgex3x0); the template lists "
+            "ET330/ET340, EM330/EM340, EM530/EM540 over RS-485 or TCP",
+            EVCC_PINS_MBMD,
+            EVCC_PV,
+            EVCC_NAN,
+        ),
+    ),
+)
+
+DEFINITIONS: dict[str, tuple[SourceDefinition, ...]] = {
+    "carlo_gavazzi_em24": EM24,
+    "carlo_gavazzi_em340": EM340,
+}
