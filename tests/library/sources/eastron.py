@@ -13,6 +13,8 @@ from tests.library.sources.upstream import (
     EVCC_PINS_MBMD,
     EVCC_PV,
     MBMD,
+    OPENEMS,
+    OPENEMS_CONVENTION,
     pick,
 )
 
@@ -151,6 +153,37 @@ MBMD_SDM72V2 = (
 )
 
 
+# io.openems.edge.meter.eastron/.../sdm630/MeterEastronSdm630Impl.java (one block, function 4)
+OPENEMS_SDM630 = (
+    _f32("voltage_l1", 0x0000, "V", "VOLTAGE_L1"),
+    _f32("voltage_l2", 0x0002, "V", "VOLTAGE_L2"),
+    _f32("voltage_l3", 0x0004, "V", "VOLTAGE_L3"),
+    _f32("current_l1", 0x0006, "A", "CURRENT_L1"),
+    _f32("current_l2", 0x0008, "A", "CURRENT_L2"),
+    _f32("current_l3", 0x000A, "A", "CURRENT_L3"),
+    _f32("power_l1", 0x000C, "W", "ACTIVE_POWER_L1"),
+    _f32("power_l2", 0x000E, "W", "ACTIVE_POWER_L2"),
+    _f32("power_l3", 0x0010, "W", "ACTIVE_POWER_L3"),
+    _f32("reactive_power_l1", 0x0018, "var", "REACTIVE_POWER_L1"),
+    _f32("reactive_power_l2", 0x001A, "var", "REACTIVE_POWER_L2"),
+    _f32("reactive_power_l3", 0x001C, "var", "REACTIVE_POWER_L3"),
+    _f32("current_sum", 0x0030, "A", "CURRENT"),
+    _f32("power", 0x0034, "W", "ACTIVE_POWER"),
+    _f32("reactive_power", 0x003C, "var", "REACTIVE_POWER"),
+    SourcePoint("frequency", "input", 0x0046, "f32", "Hz", 0.001, name="FREQUENCY"),
+    _f32("reactive_energy_import", 0x004C, "kvarh", "REACTIVE_PRODUCTION_ENERGY"),
+    _f32("reactive_energy_export", 0x004E, "kvarh", "REACTIVE_CONSUMPTION_ENERGY"),
+)
+
+# io.openems.edge.meter.eastron/.../sdm120/MeterEastronSdm120Impl.java (one block, function 4)
+OPENEMS_SDM120 = (
+    _f32("voltage", 0x0000, "V", "VOLTAGE"),
+    _f32("current", 0x0006, "A", "CURRENT"),
+    _f32("power", 0x000C, "W", "ACTIVE_POWER"),
+    _f32("reactive_power", 0x0018, "var", "REACTIVE_POWER"),
+    _f32("frequency", 0x0046, "Hz", "FREQUENCY"),
+)
+
 SDM630 = (
     SourceDefinition(
         device="eastron_sdm630",
@@ -168,6 +201,21 @@ SDM630 = (
         ref=f"{EVCC}:templates/definition/meter/eastron-sdm72v2_630.yaml",
         points=pick(MBMD_SDM630, EVCC_3P),
         notes=("evcc delegates to mbmd (type mbmd, model sdm)", EVCC_PINS_MBMD, EVCC_PV, EVCC_NAN),
+    ),
+    SourceDefinition(
+        device="eastron_sdm630",
+        source="openems",
+        ref=f"{OPENEMS}:io.openems.edge.meter.eastron/src/io/openems/edge/meter/eastron/"
+        "sdm630/MeterEastronSdm630Impl.java",
+        points=OPENEMS_SDM630,
+        notes=(
+            OPENEMS_CONVENTION,
+            "frequency 0x46 goes 1:1 into OpenEMS's mHz channel (no factor 1000, unlike its "
+            "SDM120), so OpenEMS takes the float for mHz: scale 0.001 Hz here",
+            "0x30 is the sum of the line currents (key current_sum)",
+            "OpenEMS reads no active energy register: it integrates power itself",
+            "a phase-rotation option may reassign L1..L3 (default L1, L2, L3)",
+        ),
     ),
 )
 
@@ -191,6 +239,17 @@ SDM120 = (
             "evcc's own custom template (decode float32 = high word first), not via mbmd",
             "evcc reads one energy: 0x48 for grid/charge, 0x4a (export) for pv; "
             "with usage pv it negates power",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm120",
+        source="openems",
+        ref=f"{OPENEMS}:io.openems.edge.meter.eastron/src/io/openems/edge/meter/eastron/"
+        "sdm120/MeterEastronSdm120Impl.java",
+        points=OPENEMS_SDM120,
+        notes=(
+            OPENEMS_CONVENTION,
+            "OpenEMS reads no energy register: it integrates power itself",
         ),
     ),
 )

@@ -35,3 +35,11 @@ def pick(points: tuple[SourcePoint, ...], keys: tuple[str, ...]) -> tuple[Source
     """The points with these keys, in the order of keys (KeyError if one is missing)."""
     by_key = {p.key: p for p in points}
     return tuple(by_key[k] for k in keys)
+
+
+OPENEMS = "OpenEMS/openems@0e4ea8881f78f46b6a7cd05ce570c35de334c113"
+OPENEMS_CONVENTION = (
+    "OpenEMS converts into its own channel units (mV, mA, W, var, mHz, Wh) and counts "
+    "'production' energy while its active power is positive and 'consumption' while it is "
+    "negative; invert (a config flag, default off) flips both; keys here assume it is off"
+)
