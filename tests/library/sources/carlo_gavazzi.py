@@ -14,6 +14,8 @@ from tests.library.sources.upstream import (
     EVCC_PINS_MBMD,
     EVCC_PV,
     MBMD,
+    OPENEMS,
+    OPENEMS_CONVENTION,
     pick,
 )
 
@@ -74,6 +76,31 @@ MBMD_EX3X0 = (
     _s32("energy_export", 0x4E, "kWh", 0.1, "Export"),
 )
 
+# io.openems.edge.meter.carlo.gavazzi/.../em300/MeterCarloGavazziEm300Impl.java (function 4)
+OPENEMS_EM300 = (
+    _s32("voltage_l1", 0x00, "V", 0.1, "VOLTAGE_L1"),
+    _s32("voltage_l2", 0x02, "V", 0.1, "VOLTAGE_L2"),
+    _s32("voltage_l3", 0x04, "V", 0.1, "VOLTAGE_L3"),
+    _s32("current_l1", 0x0C, "A", 0.001, "CURRENT_L1"),
+    _s32("current_l2", 0x0E, "A", 0.001, "CURRENT_L2"),
+    _s32("current_l3", 0x10, "A", 0.001, "CURRENT_L3"),
+    _s32("power_l1", 0x12, "W", 0.1, "ACTIVE_POWER_L1"),
+    _s32("power_l2", 0x14, "W", 0.1, "ACTIVE_POWER_L2"),
+    _s32("power_l3", 0x16, "W", 0.1, "ACTIVE_POWER_L3"),
+    _s32("apparent_power_l1", 0x18, "VA", 0.1, "APPARENT_POWER_L1"),
+    _s32("apparent_power_l2", 0x1A, "VA", 0.1, "APPARENT_POWER_L2"),
+    _s32("apparent_power_l3", 0x1C, "VA", 0.1, "APPARENT_POWER_L3"),
+    _s32("reactive_power_l1", 0x1E, "var", 0.1, "REACTIVE_POWER_L1"),
+    _s32("reactive_power_l2", 0x20, "var", 0.1, "REACTIVE_POWER_L2"),
+    _s32("reactive_power_l3", 0x22, "var", 0.1, "REACTIVE_POWER_L3"),
+    _s32("power", 0x28, "W", 0.1, "ACTIVE_POWER"),
+    _s32("apparent_power", 0x2A, "VA", 0.1, "APPARENT_POWER"),
+    _s32("reactive_power", 0x2C, "var", 0.1, "REACTIVE_POWER"),
+    SourcePoint("frequency", "input", 0x33, "u16", "Hz", 0.1, name="FREQUENCY"),
+    _s32("energy_import", 0x34, "kWh", 0.1, "ACTIVE_PRODUCTION_ENERGY"),
+    _s32("energy_export", 0x4E, "kWh", 0.1, "ACTIVE_CONSUMPTION_ENERGY"),
+)
+
 _MBMD_NOTE = "mbmd reads each value on its own (function 4), never in blocks"
 _EVCC_EM24 = tuple(k for k in EVCC_3P if k != "energy_export")
 
@@ -132,6 +159,20 @@ EM340 = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em340",
+        source="openems",
+        ref=f"{OPENEMS}:io.openems.edge.meter.carlo.gavazzi/src/io/openems/edge/meter/"
+        "carlo/gavazzi/em300/MeterCarloGavazziEm300Impl.java",
+        points=OPENEMS_EM300,
+        notes=(
+            OPENEMS_CONVENTION,
+            "one component for the EM300 series (EM330, EM340); reads in three blocks: "
+            "0x00-0x05, 0x0c-0x2d, 0x33-0x4f",
+            "frequency is read unsigned 16-bit (mbmd: signed); energy counters signed 32-bit "
+            "low word first",
         ),
     ),
 )

@@ -1,17 +1,27 @@
-"""Chint DTSU666 and DDSU666 as volkszaehler/mbmd reads them (facts only).
+"""Chint DTSU666 and DDSU666 as independent sources read them (facts only).
 
 evcc has no Chint template (it names the DTSU666/DDSU666 only as the Huawei power
-sensor it reads through the inverter), and neither source has a DDSU666 map.
+sensor it reads through the inverter) and mbmd has no DDSU666 map; OpenEMS has both,
+Tasmota a DDSU666 driver. All values are float32, high word first.
 """
 
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition, SourcePoint
-from tests.library.sources.upstream import MBMD
+from tests.library.sources.upstream import MBMD, OPENEMS_CONVENTION
+
+OPENEMS_CHINT = (
+    "OpenEMS/openems@{commit}:io.openems.edge.meter.chint/src/io/openems/edge/meter/chint"
+)
+TASMOTA = "arendst/Tasmota@57c7c6b01564dc00b6fdae37d80369141b091cfb"
 
 
 def _f32(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
     return SourcePoint(key, "holding", address, "f32", unit, scale, name=name)
+
+
+def _f32_input(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
+    return SourcePoint(key, "input", address, "f32", unit, scale, name=name)
 
 
 # meters/rs485/dtsu666.go: float32 high word first in holding registers, divided by a scaler
@@ -45,6 +55,44 @@ MBMD_DTSU666 = (
     _f32("frequency", 0x2044, "Hz", 0.01, "Frequency"),
 )
 
+# dtsu666/MeterChintDtsu666Impl.java: input registers (function 4)
+OPENEMS_DTSU666 = (
+    _f32_input("voltage_l1", 0x2006, "V", 0.1, "VOLTAGE_L1"),
+    _f32_input("voltage_l2", 0x2008, "V", 0.1, "VOLTAGE_L2"),
+    _f32_input("voltage_l3", 0x200A, "V", 0.1, "VOLTAGE_L3"),
+    _f32_input("current_l1", 0x200C, "A", 0.001, "CURRENT_L1"),
+    _f32_input("current_l2", 0x200E, "A", 0.001, "CURRENT_L2"),
+    _f32_input("current_l3", 0x2010, "A", 0.001, "CURRENT_L3"),
+    _f32_input("power", 0x2012, "W", 0.1, "ACTIVE_POWER"),
+    _f32_input("power_l1", 0x2014, "W", 0.1, "ACTIVE_POWER_L1"),
+    _f32_input("power_l2", 0x2016, "W", 0.1, "ACTIVE_POWER_L2"),
+    _f32_input("power_l3", 0x2018, "W", 0.1, "ACTIVE_POWER_L3"),
+    _f32_input("power_factor", 0x202A, "", 1.0, "TOTAL_POWER_FACTOR"),
+    _f32_input("frequency", 0x2044, "Hz", 0.01, "FREQUENCY"),
+    _f32_input("energy_export", 0x4000, "kWh", 1.0, "ACTIVE_CONSUMPTION_ENERGY"),
+)
+
+# ddsu666/MeterChintDdsu666Impl.java: holding registers (function 3), raw engineering units
+OPENEMS_DDSU666 = (
+    _f32("voltage", 0x2000, "V", 1.0, "VOLTAGE_L1"),
+    _f32("current", 0x2002, "A", 1.0, "CURRENT_L1"),
+    _f32("power", 0x2004, "W", 1000.0, "ACTIVE_POWER"),
+    _f32("frequency", 0x200E, "Hz", 1.0, "FREQUENCY"),
+    _f32("energy_export", 0x4000, "kWh", 1.0, "ACTIVE_CONSUMPTION_ENERGY"),
+)
+
+# tasmota/tasmota_xnrg_energy/xnrg_11_ddsu666.ino: input registers (function 4)
+TASMOTA_DDSU666 = (
+    _f32_input("voltage", 0x2000, "V", 1.0, "voltage"),
+    _f32_input("current", 0x2002, "A", 1.0, "current"),
+    _f32_input("power", 0x2004, "W", 1000.0, "active_power"),
+    _f32_input("reactive_power", 0x2006, "var", 1000.0, "reactive_power"),
+    _f32_input("power_factor", 0x200A, "", 1.0, "power_factor"),
+    _f32_input("frequency", 0x200E, "Hz", 1.0, "frequency"),
+    _f32_input("energy_import", 0x4000, "kWh", 1.0, "import_active"),
+    _f32_input("energy_export", 0x400A, "kWh", 1.0, "export_active"),
+)
+
 DTSU666 = (
     SourceDefinition(
         device="chint_dtsu666",
@@ -63,9 +111,54 @@ DTSU666 = (
             "export 2180 (decimal, float32 holding)",
         ),
     ),
+    SourceDefinition(
+        device="chint_dtsu666",
+        source="openems",
+        ref=OPENEMS_CHINT.format(commit="4d8dd72cf6a2c91c64e37cf70f666f11be5e2a06")
+        + "/dtsu666/MeterChintDtsu666Impl.java",
+        points=OPENEMS_DTSU666,
+        notes=(
+            OPENEMS_CONVENTION,
+            "reads input registers (function 4) where mbmd reads holding (function 3)",
+            "energy: one counter at 0x4000 into its consumption energy (negative-power "
+            "direction, hence energy_export here), not mbmd's 0x101e import / 0x1028 export",
+            "power factor goes 1:1 into an integer channel without unit: OpenEMS keeps "
+            "the raw per-mille value (scale 1 here, mbmd 0.001)",
+            "reads in three blocks: 0x2006-0x2019, 0x202a-0x202b, 0x2044-0x2045, plus 0x4000",
+        ),
+    ),
+)
+
+DDSU666 = (
+    SourceDefinition(
+        device="chint_ddsu666",
+        source="openems",
+        ref=OPENEMS_CHINT.format(commit="b80b477a17ae3724787c8545e3684f16f58e2c09")
+        + "/ddsu666/MeterChintDdsu666Impl.java",
+        points=OPENEMS_DDSU666,
+        notes=(
+            OPENEMS_CONVENTION,
+            "reads holding registers (function 3) where Tasmota reads input (function 4)",
+            "power is in kW on the wire (OpenEMS multiplies by 1000)",
+            "energy: one counter at 0x4000 into its consumption energy (negative-power "
+            "direction, hence energy_export here), where Tasmota reads 0x4000 as import "
+            "and 0x400a as export",
+            "also reads 0x0006 (u16, the meter's Modbus address), no entity key",
+        ),
+    ),
+    SourceDefinition(
+        device="chint_ddsu666",
+        source="tasmota",
+        ref=f"{TASMOTA}:tasmota/tasmota_xnrg_energy/xnrg_11_ddsu666.ino",
+        points=TASMOTA_DDSU666,
+        notes=(
+            "one 2-register read (function 4) per value, in a cycle",
+            "power and reactive power are kW/kvar on the wire (Tasmota multiplies by 1000)",
+        ),
+    ),
 )
 
 DEFINITIONS: dict[str, tuple[SourceDefinition, ...]] = {
     "chint_dtsu666": DTSU666,
-    "chint_ddsu666": (),
+    "chint_ddsu666": DDSU666,
 }
