@@ -8,12 +8,11 @@ Tasmota a DDSU666 driver. All values are float32, high word first.
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition, SourcePoint
-from tests.library.sources.upstream import MBMD, OPENEMS_CONVENTION
+from tests.library.sources.upstream import MBMD, OPENEMS_CONVENTION, TASMOTA_STYLE, tasmota_ref
 
 OPENEMS_CHINT = (
     "OpenEMS/openems@{commit}:io.openems.edge.meter.chint/src/io/openems/edge/meter/chint"
 )
-TASMOTA = "arendst/Tasmota@57c7c6b01564dc00b6fdae37d80369141b091cfb"
 
 
 def _f32(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
@@ -149,10 +148,11 @@ DDSU666 = (
     SourceDefinition(
         device="chint_ddsu666",
         source="tasmota",
-        ref=f"{TASMOTA}:tasmota/tasmota_xnrg_energy/xnrg_11_ddsu666.ino",
+        ref=tasmota_ref("57c7c6b01564dc00b6fdae37d80369141b091cfb", "xnrg_11_ddsu666.ino"),
         points=TASMOTA_DDSU666,
         notes=(
-            "one 2-register read (function 4) per value, in a cycle",
+            TASMOTA_STYLE,
+            "reads input registers (function 4)",
             "power and reactive power are kW/kvar on the wire (Tasmota multiplies by 1000)",
         ),
     ),

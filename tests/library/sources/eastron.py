@@ -15,7 +15,9 @@ from tests.library.sources.upstream import (
     MBMD,
     OPENEMS,
     OPENEMS_CONVENTION,
+    TASMOTA_STYLE,
     pick,
+    tasmota_ref,
 )
 
 
@@ -184,6 +186,68 @@ OPENEMS_SDM120 = (
     _f32("frequency", 0x0046, "Hz", "FREQUENCY"),
 )
 
+# xnrg_10_sdm630.ino (default build)
+TASMOTA_SDM630 = (
+    _f32("voltage_l1", 0x0000, "V", "voltage[0]"),
+    _f32("voltage_l2", 0x0002, "V", "voltage[1]"),
+    _f32("voltage_l3", 0x0004, "V", "voltage[2]"),
+    _f32("current_l1", 0x0006, "A", "current[0]"),
+    _f32("current_l2", 0x0008, "A", "current[1]"),
+    _f32("current_l3", 0x000A, "A", "current[2]"),
+    _f32("power_l1", 0x000C, "W", "active_power[0]"),
+    _f32("power_l2", 0x000E, "W", "active_power[1]"),
+    _f32("power_l3", 0x0010, "W", "active_power[2]"),
+    _f32("reactive_power_l1", 0x0018, "var", "reactive_power[0]"),
+    _f32("reactive_power_l2", 0x001A, "var", "reactive_power[1]"),
+    _f32("reactive_power_l3", 0x001C, "var", "reactive_power[2]"),
+    _f32("power_factor_l1", 0x001E, "", "power_factor[0]"),
+    _f32("power_factor_l2", 0x0020, "", "power_factor[1]"),
+    _f32("power_factor_l3", 0x0022, "", "power_factor[2]"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import_l1", 0x015A, "kWh", "import_active[0]"),
+    _f32("energy_import_l2", 0x015C, "kWh", "import_active[1]"),
+    _f32("energy_import_l3", 0x015E, "kWh", "import_active[2]"),
+    _f32("energy_export_l1", 0x0160, "kWh", "export_active[0]"),
+    _f32("energy_export_l2", 0x0162, "kWh", "export_active[1]"),
+    _f32("energy_export_l3", 0x0164, "kWh", "export_active[2]"),
+)
+
+# xnrg_08_sdm120.ino (one driver for SDM120 and SDM220)
+TASMOTA_SDM120 = (
+    _f32("voltage", 0x0000, "V", "voltage"),
+    _f32("current", 0x0006, "A", "current"),
+    _f32("power", 0x000C, "W", "active_power"),
+    _f32("apparent_power", 0x0012, "VA", "apparent_power"),
+    _f32("reactive_power", 0x0018, "var", "reactive_power"),
+    _f32("power_factor", 0x001E, "", "power_factor"),
+    _f32("phase_angle", 0x0024, "°", "phase_angle"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "import_active"),
+    _f32("energy_export", 0x004A, "kWh", "export_active"),
+    _f32("reactive_energy_import", 0x004C, "kvarh", "import_reactive"),
+    _f32("reactive_energy_export", 0x004E, "kvarh", "export_reactive"),
+    _f32("energy_total", 0x0156, "kWh", "total_active"),
+)
+
+# xnrg_21_sdm230.ino (default build)
+TASMOTA_SDM230 = (
+    _f32("voltage", 0x0000, "V", "voltage"),
+    _f32("current", 0x0006, "A", "current"),
+    _f32("power", 0x000C, "W", "active_power"),
+    _f32("apparent_power", 0x0012, "VA", "apparent_power"),
+    _f32("reactive_power", 0x0018, "var", "reactive_power"),
+    _f32("power_factor", 0x001E, "", "power_factor"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "import_active"),
+    _f32("energy_export", 0x004A, "kWh", "export_active"),
+)
+
+# xnrg_18_sdm72.ino (default build)
+TASMOTA_SDM72 = (
+    _f32("power", 0x0034, "W", "active_power"),
+    _f32("energy_total", 0x0156, "kWh", "total_active"),
+)
+
 SDM630 = (
     SourceDefinition(
         device="eastron_sdm630",
@@ -215,6 +279,17 @@ SDM630 = (
             "0x30 is the sum of the line currents (key current_sum)",
             "OpenEMS reads no active energy register: it integrates power itself",
             "a phase-rotation option may reassign L1..L3 (default L1, L2, L3)",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm630",
+        source="tasmota",
+        ref=tasmota_ref("38f1a33d38eb091b81003a407d810acab27a8af3", "xnrg_10_sdm630.ino"),
+        points=TASMOTA_SDM630,
+        notes=(
+            TASMOTA_STYLE,
+            "it also reads 0x156 (total energy) but leaves it unused; a high-rate build option "
+            "reads 0x00-0x23, 0x46 and 0x156-0x165 in three blocks instead",
         ),
     ),
 )
@@ -252,6 +327,17 @@ SDM120 = (
             "OpenEMS reads no energy register: it integrates power itself",
         ),
     ),
+    SourceDefinition(
+        device="eastron_sdm120",
+        source="tasmota",
+        ref=tasmota_ref("4001f875cc5ea13d6b14f3ffba090dddbc768226", "xnrg_08_sdm120.ino"),
+        points=TASMOTA_SDM120,
+        notes=(
+            TASMOTA_STYLE,
+            "when import 0x48 reads NaN (older SDM120) it stops reading 0x48-0x4e and 0x24 "
+            "and counts the total 0x156 as import",
+        ),
+    ),
 )
 
 SDM230 = (
@@ -272,6 +358,16 @@ SDM230 = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm230",
+        source="tasmota",
+        ref=tasmota_ref("115105bf7c7b1bcdc783f90bb226d340f1e6d3b1", "xnrg_21_sdm230.ino"),
+        points=TASMOTA_SDM230,
+        notes=(
+            TASMOTA_STYLE,
+            "a build option adds phase angle 0x24, max total demand 0x56, resettable total 0x180",
         ),
     ),
 )
@@ -300,6 +396,17 @@ SDM72D_M = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm72d_m",
+        source="tasmota",
+        ref=tasmota_ref("0446e08613d1507423ab5ff3a80d9281c6ab452f", "xnrg_18_sdm72.ino"),
+        points=TASMOTA_SDM72,
+        notes=(
+            TASMOTA_STYLE,
+            "one driver for the SDM72 (no v1/v2 split); it counts the total 0x156 as import",
+            "a build option adds import power 0x500, export power 0x502, import 0x48, export 0x4a",
         ),
     ),
 )

@@ -13,7 +13,9 @@ from tests.library.sources.upstream import (
     EVCC_PINS_MBMD,
     EVCC_PV,
     MBMD,
+    TASMOTA_STYLE,
     pick,
+    tasmota_ref,
 )
 
 
@@ -104,6 +106,27 @@ MBMD_WE516 = (
     _f32("reactive_energy_export_t2", 0x0146, "kvarh", "ReactiveExportT2"),
 )
 
+# xnrg_17_ornowe517.ino: holding registers (function 3), 8E1
+TASMOTA_WE517 = (
+    _f32("voltage_l1", 0x000E, "V", "voltage[0]"),
+    _f32("voltage_l2", 0x0010, "V", "voltage[1]"),
+    _f32("voltage_l3", 0x0012, "V", "voltage[2]"),
+    _f32("frequency", 0x0014, "Hz", "frequency"),
+    _f32("current_l1", 0x0016, "A", "current[0]"),
+    _f32("current_l2", 0x0018, "A", "current[1]"),
+    _f32("current_l3", 0x001A, "A", "current[2]"),
+    _f32("power_l1", 0x001E, "W", "active_power[0]", 1000.0),
+    _f32("power_l2", 0x0020, "W", "active_power[1]", 1000.0),
+    _f32("power_l3", 0x0022, "W", "active_power[2]", 1000.0),
+    _f32("reactive_power_l1", 0x0026, "var", "reactive_power[0]"),
+    _f32("reactive_power_l2", 0x0028, "var", "reactive_power[1]"),
+    _f32("reactive_power_l3", 0x002A, "var", "reactive_power[2]"),
+    _f32("power_factor_l1", 0x0036, "", "power_factor[0]"),
+    _f32("power_factor_l2", 0x0038, "", "power_factor[1]"),
+    _f32("power_factor_l3", 0x003A, "", "power_factor[2]"),
+    _f32("energy_total", 0x0100, "kWh", "import_active"),
+)
+
 WE514 = (
     SourceDefinition(
         device="orno_we514",
@@ -155,6 +178,19 @@ WE516 = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="orno_we516",
+        source="tasmota",
+        ref=tasmota_ref("133cc25bdb7bbff01e6a2104a789c4ecc6703347", "xnrg_17_ornowe517.ino"),
+        points=TASMOTA_WE517,
+        notes=(
+            TASMOTA_STYLE,
+            "a driver for the WE-517 (the MID variant that mbmd and evcc read with the WE-516 map)",
+            "active power is taken as kW (x1000) but reactive power as var, unscaled: "
+            "mbmd scales reactive power x1000 like active power",
+            "it counts the total energy 0x100 as import",
         ),
     ),
 )

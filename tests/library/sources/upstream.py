@@ -43,3 +43,13 @@ OPENEMS_CONVENTION = (
     "'production' energy while its active power is positive and 'consumption' while it is "
     "negative; invert (a config flag, default off) flips both; keys here assume it is off"
 )
+
+TASMOTA_STYLE = (
+    "Tasmota's driver sends one 2-register read per value in a cycle (float32 high word "
+    "first); only what the default build reads is listed"
+)
+
+
+def tasmota_ref(commit: str, file: str) -> str:
+    """The ref of one Tasmota energy driver file at one commit."""
+    return f"arendst/Tasmota@{commit}:tasmota/tasmota_xnrg_energy/{file}"
