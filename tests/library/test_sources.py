@@ -35,7 +35,9 @@ DEVICES = frozenset(
         "orno_we516",
     }
 )
-SOURCE_NAMES = re.compile(r"^(mbmd|evcc|openems|tasmota|vendor|ha-community:[\w.-]+/[\w.-]+)$")
+SOURCE_NAMES = re.compile(
+    r"^(mbmd|evcc|openems|openwb|tasmota|vendor|ha-community:[\w.-]+/[\w.-]+)$"
+)
 REPO_REF = re.compile(r"^[\w.-]+/[\w.-]+@[0-9a-f]{40}:\S+$")
 KEY = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
 # (device, source, key, other key) pairs where a source really reads one register twice

@@ -1,4 +1,4 @@
-"""Carlo Gavazzi EM24 and EM340 as volkszaehler/mbmd and evcc-io/evcc read them (facts only).
+"""Carlo Gavazzi EM24 and EM340 as mbmd, evcc and OpenEMS read them (facts only).
 
 Input registers; 32-bit values signed, low word first; mbmd divides by a scaler
 (scale = 1/scaler).

@@ -1,4 +1,4 @@
-"""Eastron SDM meters as volkszaehler/mbmd and evcc-io/evcc read them (facts only).
+"""Eastron SDM meters as mbmd, evcc, OpenEMS, Tasmota and openWB read them (facts only).
 
 All SDM values are IEEE 754 float32, high word first, in input registers, at scale 1.
 """
@@ -15,6 +15,7 @@ from tests.library.sources.upstream import (
     MBMD,
     OPENEMS,
     OPENEMS_CONVENTION,
+    OPENWB,
     TASMOTA_STYLE,
     pick,
     tasmota_ref,
@@ -248,6 +249,44 @@ TASMOTA_SDM72 = (
     _f32("energy_total", 0x0156, "kWh", "total_active"),
 )
 
+# packages/modules/common/sdm.py: class Sdm630_72 (SDM630 and SDM72) and class Sdm120
+OPENWB_SDM630_72 = (
+    _f32("voltage_l1", 0x0000, "V", "voltages[0]"),
+    _f32("voltage_l2", 0x0002, "V", "voltages[1]"),
+    _f32("voltage_l3", 0x0004, "V", "voltages[2]"),
+    _f32("current_l1", 0x0006, "A", "currents[0]"),
+    _f32("current_l2", 0x0008, "A", "currents[1]"),
+    _f32("current_l3", 0x000A, "A", "currents[2]"),
+    _f32("power_l1", 0x000C, "W", "powers[0]"),
+    _f32("power_l2", 0x000E, "W", "powers[1]"),
+    _f32("power_l3", 0x0010, "W", "powers[2]"),
+    _f32("power_factor_l1", 0x001E, "", "power_factors[0]"),
+    _f32("power_factor_l2", 0x0020, "", "power_factors[1]"),
+    _f32("power_factor_l3", 0x0022, "", "power_factors[2]"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "imported"),
+    _f32("energy_export", 0x004A, "kWh", "exported"),
+)
+OPENWB_SDM120 = (
+    _f32("voltage", 0x0000, "V", "voltages[0]"),
+    _f32("current", 0x0006, "A", "currents[0]"),
+    _f32("power", 0x000C, "W", "power"),
+    _f32("power_factor", 0x001E, "", "power_factors[0]"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "imported"),
+    _f32("energy_export", 0x004A, "kWh", "exported"),
+)
+OPENWB_NOTES = (
+    "a frequency above 100 is divided by 10 (a guard for meters that report 0.1 Hz)",
+    "also reads the serial number (holding 0xfc00, u32), no entity key",
+)
+OPENWB_3P = (
+    *OPENWB_NOTES,
+    "class Sdm630_72 for the SDM630 and the SDM72: blocks 0x00-0x11, 0x1e-0x23, "
+    "0x46-0x4b, one read per group after a failed block read",
+    "total power is the sum of the phase powers, 0x34 is not read",
+)
+
 SDM630 = (
     SourceDefinition(
         device="eastron_sdm630",
@@ -291,6 +330,13 @@ SDM630 = (
             "it also reads 0x156 (total energy) but leaves it unused; a high-rate build option "
             "reads 0x00-0x23, 0x46 and 0x156-0x165 in three blocks instead",
         ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm630",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/common/sdm.py",
+        points=OPENWB_SDM630_72,
+        notes=OPENWB_3P,
     ),
 )
 
@@ -337,6 +383,13 @@ SDM120 = (
             "when import 0x48 reads NaN (older SDM120) it stops reading 0x48-0x4e and 0x24 "
             "and counts the total 0x156 as import",
         ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm120",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/common/sdm.py",
+        points=OPENWB_SDM120,
+        notes=(*OPENWB_NOTES, "class Sdm120: blocks 0x00-0x0d, 0x1e-0x1f, 0x46-0x4b"),
     ),
 )
 
@@ -408,6 +461,13 @@ SDM72D_M = (
             "one driver for the SDM72 (no v1/v2 split); it counts the total 0x156 as import",
             "a build option adds import power 0x500, export power 0x502, import 0x48, export 0x4a",
         ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm72d_m",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/common/sdm.py",
+        points=OPENWB_SDM630_72,
+        notes=OPENWB_3P,
     ),
 )
 

@@ -1,4 +1,4 @@
-"""ORNO WE-514 and WE-516 as volkszaehler/mbmd and evcc-io/evcc read them (facts only).
+"""ORNO WE-514 and WE-516 as mbmd, evcc and Tasmota read them (facts only).
 
 Holding registers, high word first.
 """

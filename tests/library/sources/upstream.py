@@ -53,3 +53,6 @@ TASMOTA_STYLE = (
 def tasmota_ref(commit: str, file: str) -> str:
     """The ref of one Tasmota energy driver file at one commit."""
     return f"arendst/Tasmota@{commit}:tasmota/tasmota_xnrg_energy/{file}"
+
+
+OPENWB = "openWB/core@3039a21010759129b7dd182df0e7e183fed28baa"
