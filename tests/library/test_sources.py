@@ -36,7 +36,7 @@ DEVICES = frozenset(
     }
 )
 SOURCE_NAMES = re.compile(
-    r"^(mbmd|evcc|openems|openwb|tasmota|vendor|ha-community:[\w.-]+/[\w.-]+)$"
+    r"^(mbmd|evcc|openems|openwb|tasmota|victron|vendor|ha-community:[\w.-]+/[\w.-]+)$"
 )
 REPO_REF = re.compile(r"^[\w.-]+/[\w.-]+@[0-9a-f]{40}:\S+$")
 KEY = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
@@ -47,6 +47,30 @@ SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
 KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     "eastron_sdm630": frozenset({"frequency scale"}),
     "carlo_gavazzi_em340": frozenset({"frequency type"}),
+    "carlo_gavazzi_em24_e1": frozenset(
+        {"frequency type"}
+        | {
+            f"{key} table"
+            for key in (
+                "voltage_l1",
+                "voltage_l2",
+                "voltage_l3",
+                "current_l1",
+                "current_l2",
+                "current_l3",
+                "power_l1",
+                "power_l2",
+                "power_l3",
+                "power",
+                "frequency",
+                "energy_import",
+                "energy_import_l1",
+                "energy_import_l2",
+                "energy_import_l3",
+                "energy_export",
+            )
+        }
+    ),
     "chint_dtsu666": frozenset(
         {"energy_export address", "power_factor scale"}
         | {

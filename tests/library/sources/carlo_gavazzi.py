@@ -1,6 +1,6 @@
-"""Carlo Gavazzi EM24 and EM340 as mbmd, evcc and OpenEMS read them (facts only).
+"""Carlo Gavazzi EM24 (RS-485 and Ethernet) and EM340 as mbmd, evcc, OpenEMS and Victron read them.
 
-Input registers; 32-bit values signed, low word first; mbmd divides by a scaler
+Facts only. 32-bit values signed, low word first; mbmd divides by a scaler
 (scale = 1/scaler).
 """
 
@@ -16,6 +16,8 @@ from tests.library.sources.upstream import (
     MBMD,
     OPENEMS,
     OPENEMS_CONVENTION,
+    VICTRON,
+    VICTRON_STYLE,
     pick,
 )
 
@@ -26,6 +28,10 @@ def _s32(key: str, address: int, unit: str, scale: float, name: str) -> SourcePo
 
 def _s16(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
     return SourcePoint(key, "input", address, "s16", unit, scale, name=name)
+
+
+def _h32(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
+    return SourcePoint(key, "holding", address, "s32", unit, scale, "little", name)
 
 
 # meters/rs485/carlogavazzi-em24.go (producer CGEM24: the RS-485 EM24)
@@ -101,6 +107,50 @@ OPENEMS_EM300 = (
     _s32("energy_export", 0x4E, "kWh", 0.1, "ACTIVE_CONSUMPTION_ENERGY"),
 )
 
+# meters/rs485/carlogavazzi-em24_e1.go (producer CGEM24_E1: the Ethernet EM24)
+MBMD_EM24_E1 = (
+    _s32("voltage_l1", 0x00, "V", 0.1, "VoltageL1"),
+    _s32("voltage_l2", 0x02, "V", 0.1, "VoltageL2"),
+    _s32("voltage_l3", 0x04, "V", 0.1, "VoltageL3"),
+    _s32("current_l1", 0x0C, "A", 0.001, "CurrentL1"),
+    _s32("current_l2", 0x0E, "A", 0.001, "CurrentL2"),
+    _s32("current_l3", 0x10, "A", 0.001, "CurrentL3"),
+    _s32("power_l1", 0x12, "W", 0.1, "PowerL1"),
+    _s32("power_l2", 0x14, "W", 0.1, "PowerL2"),
+    _s32("power_l3", 0x16, "W", 0.1, "PowerL3"),
+    _s32("power", 0x28, "W", 0.1, "Power"),
+    _s16("power_factor_l1", 0x2E, "", 0.001, "CosphiL1"),
+    _s16("power_factor_l2", 0x2F, "", 0.001, "CosphiL2"),
+    _s16("power_factor_l3", 0x30, "", 0.001, "CosphiL3"),
+    _s16("power_factor", 0x31, "", 0.001, "Cosphi"),
+    _s16("frequency", 0x33, "Hz", 0.1, "Frequency"),
+    _s32("energy_import", 0x34, "kWh", 0.1, "Import"),
+    _s32("energy_import_l1", 0x40, "kWh", 0.1, "ImportL1"),
+    _s32("energy_import_l2", 0x42, "kWh", 0.1, "ImportL2"),
+    _s32("energy_import_l3", 0x44, "kWh", 0.1, "ImportL3"),
+    _s32("energy_export", 0x4E, "kWh", 0.1, "Export"),
+)
+
+# carlo_gavazzi.py (class EM24_Meter, EM24 Ethernet), three-phase configuration
+VICTRON_EM24_E1 = (
+    _h32("voltage_l1", 0x00, "V", 0.1, "/Ac/L1/Voltage"),
+    _h32("voltage_l2", 0x02, "V", 0.1, "/Ac/L2/Voltage"),
+    _h32("voltage_l3", 0x04, "V", 0.1, "/Ac/L3/Voltage"),
+    _h32("current_l1", 0x0C, "A", 0.001, "/Ac/L1/Current"),
+    _h32("current_l2", 0x0E, "A", 0.001, "/Ac/L2/Current"),
+    _h32("current_l3", 0x10, "A", 0.001, "/Ac/L3/Current"),
+    _h32("power_l1", 0x12, "W", 0.1, "/Ac/L1/Power"),
+    _h32("power_l2", 0x14, "W", 0.1, "/Ac/L2/Power"),
+    _h32("power_l3", 0x16, "W", 0.1, "/Ac/L3/Power"),
+    _h32("power", 0x28, "W", 0.1, "/Ac/Power"),
+    SourcePoint("frequency", "holding", 0x33, "u16", "Hz", 0.1, name="/Ac/Frequency"),
+    _h32("energy_import", 0x34, "kWh", 0.1, "/Ac/Energy/Forward"),
+    _h32("energy_import_l1", 0x40, "kWh", 0.1, "/Ac/L1/Energy/Forward"),
+    _h32("energy_import_l2", 0x42, "kWh", 0.1, "/Ac/L2/Energy/Forward"),
+    _h32("energy_import_l3", 0x44, "kWh", 0.1, "/Ac/L3/Energy/Forward"),
+    _h32("energy_export", 0x4E, "kWh", 0.1, "/Ac/Energy/Reverse"),
+)
+
 _MBMD_NOTE = "mbmd reads each value on its own (function 4), never in blocks"
 _EVCC_EM24 = tuple(k for k in EVCC_3P if k != "energy_export")
 
@@ -113,10 +163,8 @@ EM24 = (
         notes=(
             _MBMD_NOTE,
             "energy counters are read as signed 32-bit (low word first)",
-            "mbmd has a second producer for the Ethernet EM24_E1 "
-            "(meters/rs485/carlogavazzi-em24_e1.go) whose map differs from 0x2e on: "
-            "power factor L1..L3/total 0x2e..0x31, frequency 0x33, import 0x34, "
-            "import L1..L3 0x40/0x42/0x44, export 0x4e (the EM340 map below)",
+            "the Ethernet EM24 (EM24_E1) has another map from 0x2e on: see the device "
+            "carlo_gavazzi_em24_e1",
         ),
     ),
     SourceDefinition(
@@ -132,6 +180,46 @@ EM24 = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+)
+
+EM24_E1 = (
+    SourceDefinition(
+        device="carlo_gavazzi_em24_e1",
+        source="mbmd",
+        ref=f"{MBMD}:meters/rs485/carlogavazzi-em24_e1.go",
+        points=MBMD_EM24_E1,
+        notes=(_MBMD_NOTE, "energy counters are read as signed 32-bit (low word first)"),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em24_e1",
+        source="evcc",
+        ref=f"{EVCC}:templates/definition/meter/cg-em24_e1.yaml",
+        points=pick(MBMD_EM24_E1, EVCC_3P),
+        notes=(
+            "evcc delegates to mbmd (type mbmd, model cgem24_e1); unlike its RS-485 EM24 "
+            "template it still reads export energy",
+            EVCC_PINS_MBMD,
+            EVCC_PV,
+            EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em24_e1",
+        source="victron",
+        ref=f"{VICTRON}:carlo_gavazzi.py",
+        points=VICTRON_EM24_E1,
+        notes=(
+            VICTRON_STYLE,
+            "identifies the model by holding 0x000b (u16): 1648..1653 are the EM24DINAV23XE1 "
+            "and EM24DINAV53XE1 X/PFA/PFB variants",
+            "WRITES holding 0xa000 (application) to 7 ('H') at start when it reads otherwise: "
+            "the export counters depend on the application setting",
+            "reads the phase configuration at holding 0x1002 (0 3P.n, 1 3P.1, 2 2P, 3 1P, "
+            "4 3P) and only the phases it has; phase sequence 0x32 (0 or 0xffff) on 3 phases; "
+            "front selector position 0xa100 (0 kVARh, 1 '2', 2 '1', 3 Locked)",
+            "frequency is read unsigned 16-bit (mbmd: signed)",
         ),
     ),
 )
@@ -179,5 +267,6 @@ EM340 = (
 
 DEFINITIONS: dict[str, tuple[SourceDefinition, ...]] = {
     "carlo_gavazzi_em24": EM24,
+    "carlo_gavazzi_em24_e1": EM24_E1,
     "carlo_gavazzi_em340": EM340,
 }

@@ -56,3 +56,9 @@ def tasmota_ref(commit: str, file: str) -> str:
 
 
 OPENWB = "openWB/core@3039a21010759129b7dd182df0e7e183fed28baa"
+
+VICTRON = "victronenergy/dbus-modbus-client@fe12d8c9c30fab4310e16c10bbec0ced4ca9926f"
+VICTRON_STYLE = (
+    "Victron's dbus-modbus-client reads holding registers (function 3), packing nearby "
+    "registers into block reads"
+)
