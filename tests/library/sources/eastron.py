@@ -1,6 +1,7 @@
 """Eastron SDM meters as mbmd, evcc, OpenEMS, Tasmota and openWB read them (facts only).
 
-All SDM values are IEEE 754 float32, high word first, in input registers, at scale 1.
+All SDM values are IEEE 754 float32, high word first, in input registers, at scale 1
+(one source reads the SDM630 frequency at another: see its notes).
 """
 
 from __future__ import annotations
