@@ -8,13 +8,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 TABLES = frozenset({"input", "holding"})
-TYPES = frozenset({"f32", "u16", "s16", "u32", "s32", "u64", "s64"})
+# "f64" is added to lib37's list: one community source reads an ORNO counter as float64
+TYPES = frozenset({"f32", "f64", "u16", "s16", "u32", "s32", "u64", "s64"})
 WORD_ORDERS = frozenset({"big", "little"})
 # "°" (phase angle) is added to lib37's list: mbmd reads SDM phase angles in degrees
 UNITS = frozenset(
     {"V", "A", "W", "kW", "VA", "kVA", "var", "kvar", "Hz", "kWh", "Wh", "kvarh", "%", "", "°"}
 )
-_WIDTHS = {"u16": 1, "s16": 1, "f32": 2, "u32": 2, "s32": 2, "u64": 4, "s64": 4}
+_WIDTHS = {"u16": 1, "s16": 1, "f32": 2, "u32": 2, "s32": 2, "u64": 4, "s64": 4, "f64": 4}
 
 
 @dataclass(frozen=True, slots=True)
@@ -24,7 +25,7 @@ class SourcePoint:
     key: str  # the library mapping's entity key this point corresponds to
     table: str  # "input" | "holding"
     address: int  # 0-based wire address as sent in the Modbus PDU
-    type: str  # "f32" | "u16" | "s16" | "u32" | "s32" | "u64" | "s64"
+    type: str  # "f32" | "f64" | "u16" | "s16" | "u32" | "s32" | "u64" | "s64"
     unit: str  # the unit of raw*scale
     scale: float = 1.0  # engineering value = raw * scale (before unit conversion)
     word_order: str = "big"  # "big" (high word first) | "little"

@@ -36,7 +36,7 @@ DEVICES = frozenset(
     }
 )
 SOURCE_NAMES = re.compile(
-    r"^(mbmd|evcc|openems|openwb|tasmota|victron|vendor|ha-community:[\w.-]+/[\w.-]+)$"
+    r"^(mbmd|evcc|openems|openwb|tasmota|victron|vendor|(ha-)?community:[\w.-]+/[\w.-]+)$"
 )
 REPO_REF = re.compile(r"^[\w.-]+/[\w.-]+@[0-9a-f]{40}:\S+$")
 KEY = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
@@ -95,6 +95,17 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     "chint_ddsu666": frozenset(
         {"0x4000 key", "energy_export address"}
         | {f"{key} table" for key in ("voltage", "current", "power", "frequency", "energy_export")}
+    ),
+    "orno_we514": frozenset(
+        {
+            "frequency type",
+            "voltage type",
+            "power_factor type",
+            "energy_total type",
+            "energy_total scale",
+            "reactive_energy_total type",
+            "reactive_energy_total scale",
+        }
     ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}

@@ -3,7 +3,8 @@
 Sources (``SourceDefinition.source``): mbmd (volkszaehler/mbmd), evcc (evcc-io/evcc; most
 of its meter templates delegate to mbmd and are transcribed from mbmd's producer they
 name), openems (OpenEMS/openems), tasmota (arendst/Tasmota's energy drivers), openwb
-(openWB/core) and victron (victronenergy/dbus-modbus-client). Each definition lists only
+(openWB/core), victron (victronenergy/dbus-modbus-client) and community:<owner>/<repo>
+for a smaller community project. Each definition lists only
 what that source reads, under the library's entity keys; a register a source reads under
 another meaning (OpenEMS's "consumption" energy) gets the key of that meaning, so
 ``disagreements()`` shows it. Units are those of raw * scale as the source computes it.

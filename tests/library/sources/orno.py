@@ -1,4 +1,4 @@
-"""ORNO WE-514 and WE-516 as mbmd, evcc and Tasmota read them (facts only).
+"""ORNO WE-514 and WE-516 as mbmd, evcc, Tasmota and a community bridge read them (facts only).
 
 Holding registers, high word first.
 """
@@ -127,6 +127,20 @@ TASMOTA_WE517 = (
     _f32("energy_total", 0x0100, "kWh", "import_active"),
 )
 
+# gituser-rk/orno-modbus-mqtt modbus-mqtt.py (minimalmodbus, function 3), the repository
+# that hosts the WE-514/515 register description mbmd cites
+COMMUNITY_WE514 = (
+    _p("frequency", 0x130, "s16", "Hz", 0.01, "Frequency"),
+    _p("voltage", 0x131, "s16", "V", 0.01, "Voltage"),
+    _p("current", 0x139, "u32", "A", 0.001, "Current"),
+    _p("power", 0x140, "u32", "W", 1.0, "ActivePower"),
+    _p("reactive_power", 0x148, "u32", "var", 1.0, "ReactivePower"),
+    _p("apparent_power", 0x150, "u32", "VA", 1.0, "ApparentPower"),
+    _p("power_factor", 0x158, "s16", "", 0.001, "PowerFactor"),
+    _p("energy_total", 0xA000, "f64", "kWh", 1.0, "ActiveEnergy"),
+    _p("reactive_energy_total", 0xA01E, "f64", "kvarh", 1.0, "ReactiveEnergy"),
+)
+
 WE514 = (
     SourceDefinition(
         device="orno_we514",
@@ -150,6 +164,18 @@ WE514 = (
             "evcc takes the total energy 0xa000 (mbmd Sum) as its energy (import) counter",
             EVCC_PINS_MBMD,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="orno_we514",
+        source="community:gituser-rk/orno-modbus-mqtt",
+        ref="gituser-rk/orno-modbus-mqtt@36a0a4487ef7e03c9b899fd1d9951107034ad62a:modbus-mqtt.py",
+        points=COMMUNITY_WE514,
+        notes=(
+            "one read per value (minimalmodbus, function 3); 16-bit values read signed",
+            "reads the energy counters 0xa000 and 0xa01e as 4-register float64 and publishes "
+            "int(value) in kWh/kvarh, where mbmd reads u32 in 0.01 kWh; mbmd's tariff "
+            "counters at 0xa002/0xa004 (2 registers apart) fit 32-bit values",
         ),
     ),
 )
