@@ -46,6 +46,15 @@ SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
 # address read under different keys); the mapping authors resolve each one in their notes
 KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     "eastron_sdm630": frozenset({"frequency scale"}),
+    "carlo_gavazzi_em24": frozenset(
+        {
+            "current_l1 scale",
+            "current_l2 scale",
+            "current_l3 scale",
+            "frequency type",
+            "energy_import address",
+        }
+    ),
     "carlo_gavazzi_em340": frozenset({"frequency type"}),
     "carlo_gavazzi_em24_e1": frozenset(
         {"frequency type"}

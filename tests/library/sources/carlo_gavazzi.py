@@ -58,6 +58,32 @@ MBMD_EM24 = (
     _s32("energy_export", 0x5C, "kWh", 0.1, "Export"),
 )
 
+# io.openems.edge.meter.carlo.gavazzi/.../em24/MeterCarloGavazziEm24Impl.java and
+# common/AbstractMeterCarloGavazziEmSeries.java at 8f573fb6 (function 4)
+OPENEMS_EM24 = (
+    _s32("voltage_l1", 0x00, "V", 0.1, "VOLTAGE_L1"),
+    _s32("voltage_l2", 0x02, "V", 0.1, "VOLTAGE_L2"),
+    _s32("voltage_l3", 0x04, "V", 0.1, "VOLTAGE_L3"),
+    _s32("current_l1", 0x0C, "A", 0.1, "CURRENT_L1"),
+    _s32("current_l2", 0x0E, "A", 0.1, "CURRENT_L2"),
+    _s32("current_l3", 0x10, "A", 0.1, "CURRENT_L3"),
+    _s32("power_l1", 0x12, "W", 0.1, "ACTIVE_POWER_L1"),
+    _s32("power_l2", 0x14, "W", 0.1, "ACTIVE_POWER_L2"),
+    _s32("power_l3", 0x16, "W", 0.1, "ACTIVE_POWER_L3"),
+    _s32("apparent_power_l1", 0x18, "VA", 0.1, "APPARENT_POWER_L1"),
+    _s32("apparent_power_l2", 0x1A, "VA", 0.1, "APPARENT_POWER_L2"),
+    _s32("apparent_power_l3", 0x1C, "VA", 0.1, "APPARENT_POWER_L3"),
+    _s32("reactive_power_l1", 0x1E, "var", 0.1, "REACTIVE_POWER_L1"),
+    _s32("reactive_power_l2", 0x20, "var", 0.1, "REACTIVE_POWER_L2"),
+    _s32("reactive_power_l3", 0x22, "var", 0.1, "REACTIVE_POWER_L3"),
+    _s32("power", 0x28, "W", 0.1, "ACTIVE_POWER"),
+    _s32("apparent_power", 0x2A, "VA", 0.1, "APPARENT_POWER"),
+    _s32("reactive_power", 0x2C, "var", 0.1, "REACTIVE_POWER"),
+    SourcePoint("frequency", "input", 0x37, "u16", "Hz", 0.1, name="FREQUENCY"),
+    _s32("energy_import", 0x3E, "kWh", 0.1, "ACTIVE_PRODUCTION_ENERGY"),
+    _s32("energy_export", 0x5C, "kWh", 0.1, "ACTIVE_CONSUMPTION_ENERGY"),
+)
+
 # meters/rs485/carlogavazzi-ex3x0.go (producer CGEX3X0: EM330, EM340, ET330, ET340)
 MBMD_EX3X0 = (
     _s32("voltage_l1", 0x00, "V", 0.1, "VoltageL1"),
@@ -180,6 +206,25 @@ EM24 = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em24",
+        source="openems",
+        ref="OpenEMS/openems@8f573fb6acd26ebff56915004366525551486e53:"
+        "io.openems.edge.meter.carlo.gavazzi/src/io/openems/edge/meter/carlo/gavazzi/em24/"
+        "MeterCarloGavazziEm24Impl.java",
+        points=OPENEMS_EM24,
+        notes=(
+            OPENEMS_CONVENTION,
+            "an EM24 component of a stored OpenEMS version (with common/"
+            "AbstractMeterCarloGavazziEmSeries.java at the same commit); the current "
+            "snapshot has only EM100 and EM300 components",
+            "it scales the currents by 100 into mA (0.1 A per count) where mbmd and its own "
+            "EM300 take mA (0.001 A per count)",
+            "it reads kWh(+) TOT at 0x3e where mbmd reads import at 0x42",
+            "reads in small blocks: 0x00-0x05, 0x0c-0x11, 0x12-0x17, 0x18-0x1d, 0x1e-0x23, "
+            "0x28-0x2d, then 0x37, 0x3e, 0x5c one at a time",
         ),
     ),
 )
