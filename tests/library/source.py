@@ -11,9 +11,26 @@ TABLES = frozenset({"input", "holding"})
 # "f64" is added to lib37's list: one community source reads an ORNO counter as float64
 TYPES = frozenset({"f32", "f64", "u16", "s16", "u32", "s32", "u64", "s64"})
 WORD_ORDERS = frozenset({"big", "little"})
-# "°" (phase angle) is added to lib37's list: mbmd reads SDM phase angles in degrees
+# "°" (phase angle) and "kVAh" (apparent energy) are added to lib37's list
 UNITS = frozenset(
-    {"V", "A", "W", "kW", "VA", "kVA", "var", "kvar", "Hz", "kWh", "Wh", "kvarh", "%", "", "°"}
+    {
+        "V",
+        "A",
+        "W",
+        "kW",
+        "VA",
+        "kVA",
+        "var",
+        "kvar",
+        "Hz",
+        "kWh",
+        "Wh",
+        "kvarh",
+        "kVAh",
+        "%",
+        "",
+        "°",
+    }
 )
 _WIDTHS = {"u16": 1, "s16": 1, "f32": 2, "u32": 2, "s32": 2, "u64": 4, "s64": 4, "f64": 4}
 

@@ -13,10 +13,11 @@ another meaning (OpenEMS's "consumption" energy) gets the key of that meaning, s
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition
-from tests.library.sources import abb, carlo_gavazzi, chint, eastron, orno
+from tests.library.sources import abb, carlo_gavazzi, chint, eastron, eastron_sdm_modbus, orno
 
-_MODULES = (eastron, abb, carlo_gavazzi, chint, orno)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno)
 
-SOURCES: dict[str, tuple[SourceDefinition, ...]] = {
-    device: definitions for module in _MODULES for device, definitions in module.DEFINITIONS.items()
-}
+SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
+for _module in _MODULES:
+    for _device, _definitions in _module.DEFINITIONS.items():
+        SOURCES[_device] = SOURCES.get(_device, ()) + _definitions
