@@ -114,6 +114,8 @@ def _field(point: SourcePoint, field: str) -> str:
         return f"{scale:.6g} {unit}".rstrip()
     if field == "address":
         return f"{point.address:#06x}"
+    if field == "word_order" and width(point) == 1:
+        return "-"  # one register has no word order
     return str(getattr(point, field))
 
 

@@ -208,6 +208,12 @@ def test_disagreements_compare_each_field() -> None:
     assert found[1].values == (("a", "0x000c"), ("b", "0x000e"))
 
 
+def test_disagreements_ignore_the_word_order_of_one_register() -> None:
+    big = SourcePoint("frequency", "input", 0x33, "u16", "Hz", 0.1)
+    little = SourcePoint("frequency", "input", 0x33, "u16", "Hz", 0.1, "little")
+    assert disagreements((_definition("a", big), _definition("b", little))) == []
+
+
 def test_disagreements_find_one_register_under_two_keys() -> None:
     imp = SourcePoint("energy_import", "input", 0x4000, "f32", "kWh")
     exp = SourcePoint("energy_export", "input", 0x4000, "f32", "kWh")

@@ -1,4 +1,4 @@
-"""Carlo Gavazzi EM24 (RS-485 and Ethernet) and EM340 as mbmd, evcc, OpenEMS and Victron read them.
+"""Carlo Gavazzi EM24 (RS-485, Ethernet) and EM340 as mbmd, evcc, OpenEMS, Victron, nmakel read them.
 
 Facts only. 32-bit values signed, low word first; mbmd divides by a scaler
 (scale = 1/scaler).
@@ -32,6 +32,11 @@ def _s16(key: str, address: int, unit: str, scale: float, name: str) -> SourcePo
 
 def _h32(key: str, address: int, unit: str, scale: float, name: str) -> SourcePoint:
     return SourcePoint(key, "holding", address, "s32", unit, scale, "little", name)
+
+
+def _x(key: str, address: int, type_: str, unit: str, scale: float, name: str) -> SourcePoint:
+    order = "little" if type_ == "s32" else "big"
+    return SourcePoint(key, "input", address, type_, unit, scale, order, name)
 
 
 # meters/rs485/carlogavazzi-em24.go (producer CGEM24: the RS-485 EM24)
@@ -177,6 +182,50 @@ VICTRON_EM24_E1 = (
     _h32("energy_export", 0x4E, "kWh", 0.1, "/Ac/Energy/Reverse"),
 )
 
+# nmakel/sdm_modbus src/sdm_modbus/carlogavazzi.py (class EM24, from the EM24 Ethernet
+# protocol), input registers, words low first
+NMAKEL_EM24_E1 = (
+    _x("voltage_l1", 0x00, "s32", "V", 0.1, "l1_voltage"),
+    _x("voltage_l2", 0x02, "s32", "V", 0.1, "l2_voltage"),
+    _x("voltage_l3", 0x04, "s32", "V", 0.1, "l3_voltage"),
+    _x("voltage_l1_l2", 0x06, "s32", "V", 0.1, "l12_voltage"),
+    _x("voltage_l2_l3", 0x08, "s32", "V", 0.1, "l23_voltage"),
+    _x("voltage_l3_l1", 0x0A, "s32", "V", 0.1, "l31_voltage"),
+    _x("current_l1", 0x0C, "s32", "A", 0.001, "l1_current"),
+    _x("current_l2", 0x0E, "s32", "A", 0.001, "l2_current"),
+    _x("current_l3", 0x10, "s32", "A", 0.001, "l3_current"),
+    _x("power_l1", 0x12, "s32", "W", 0.1, "l1_power_active"),
+    _x("power_l2", 0x14, "s32", "W", 0.1, "l2_power_active"),
+    _x("power_l3", 0x16, "s32", "W", 0.1, "l3_power_active"),
+    _x("apparent_power_l1", 0x18, "s32", "VA", 0.1, "l1_power_apparent"),
+    _x("apparent_power_l2", 0x1A, "s32", "VA", 0.1, "l2_power_apparent"),
+    _x("apparent_power_l3", 0x1C, "s32", "VA", 0.1, "l3_power_apparent"),
+    _x("reactive_power_l1", 0x1E, "s32", "var", 0.1, "l1_power_reactive"),
+    _x("reactive_power_l2", 0x20, "s32", "var", 0.1, "l2_power_reactive"),
+    _x("reactive_power_l3", 0x22, "s32", "var", 0.1, "l3_power_reactive"),
+    _x("voltage_average", 0x24, "s32", "V", 0.1, "voltage_ln"),
+    _x("voltage_line_average", 0x26, "s32", "V", 0.1, "voltage_ll"),
+    _x("power", 0x28, "s32", "W", 0.1, "power_active"),
+    _x("apparent_power", 0x2A, "s32", "VA", 0.1, "power_apparent"),
+    _x("reactive_power", 0x2C, "s32", "var", 0.1, "power_reactive"),
+    _x("power_factor_l1", 0x2E, "s16", "", 0.001, "l1_power_factor"),
+    _x("power_factor_l2", 0x2F, "s16", "", 0.001, "l2_power_factor"),
+    _x("power_factor_l3", 0x30, "s16", "", 0.001, "l3_power_factor"),
+    _x("power_factor", 0x31, "s16", "", 0.001, "total_pf"),
+    _x("frequency", 0x33, "u16", "Hz", 0.1, "frequency"),
+    _x("energy_import", 0x34, "s32", "kWh", 0.1, "import_energy_active"),
+    _x("reactive_energy_import", 0x36, "s32", "kvarh", 0.1, "import_energy_reactive"),
+    _x("demand_power", 0x38, "s32", "W", 0.1, "demand_power_active"),
+    _x("max_demand_power", 0x3A, "s32", "W", 0.1, "maximum_demand_power_active"),
+    _x("energy_import_l1", 0x40, "s32", "kWh", 0.1, "l1_import_energy_active"),
+    _x("energy_import_l2", 0x42, "s32", "kWh", 0.1, "l2_import_energy_active"),
+    _x("energy_import_l3", 0x44, "s32", "kWh", 0.1, "l3_import_energy_active"),
+    _x("energy_export", 0x4E, "s32", "kWh", 0.1, "export_energy_active"),
+    _x("reactive_energy_export", 0x50, "s32", "kvarh", 0.1, "export_energy_reactive"),
+    _x("demand_apparent_power", 0x76, "s32", "VA", 0.1, "demand_power_apparent"),
+    _x("max_demand_apparent_power", 0x78, "s32", "VA", 0.1, "maximum_demand_power_apparent"),
+)
+
 _MBMD_NOTE = "mbmd reads each value on its own (function 4), never in blocks"
 _EVCC_EM24 = tuple(k for k in EVCC_3P if k != "energy_export")
 
@@ -265,6 +314,17 @@ EM24_E1 = (
             "4 3P) and only the phases it has; phase sequence 0x32 (0 or 0xffff) on 3 phases; "
             "front selector position 0xa100 (0 kVARh, 1 '2', 2 '1', 3 Locked)",
             "frequency is read unsigned 16-bit (mbmd: signed)",
+        ),
+    ),
+    SourceDefinition(
+        device="carlo_gavazzi_em24_e1",
+        source="community:nmakel/sdm_modbus",
+        ref="nmakel/sdm_modbus@fead352846b36ff8ca9f89c1491ee047ab2b55d1:"
+        "src/sdm_modbus/carlogavazzi.py",
+        points=NMAKEL_EM24_E1,
+        notes=(
+            "class EM24 of a Python library for meters, written from the EM24 Ethernet "
+            "protocol; also lists the phase sequence at 0x32 (s16), no library key",
         ),
     ),
 )
