@@ -81,7 +81,7 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
         }
     ),
     "chint_dtsu666": frozenset(
-        {"energy_export address", "power_factor scale"}
+        {"energy_import address", "energy_export address", "power_factor scale"}
         | {
             f"{key} table"
             for key in (

@@ -2,7 +2,8 @@
 
 evcc has no Chint template (it names the DTSU666/DDSU666 only as the Huawei power
 sensor it reads through the inverter) and mbmd has no DDSU666 map; OpenEMS has both,
-Tasmota a DDSU666 driver. All values are float32, high word first.
+Tasmota a DDSU666 driver, wschoenell/solariot a DTSU666 reader. All values are float32,
+high word first.
 """
 
 from __future__ import annotations
@@ -92,6 +93,34 @@ TASMOTA_DDSU666 = (
     _f32_input("energy_export", 0x400A, "kWh", 1.0, "export_active"),
 )
 
+# wschoenell/solariot dtsu666_meter.py: holding registers, one 2-register read per value
+SOLARIOT_DTSU666 = (
+    _f32("voltage_l1_l2", 0x2000, "V", 0.1, "Volts_AB"),
+    _f32("voltage_l2_l3", 0x2002, "V", 0.1, "Volts_BC"),
+    _f32("voltage_l3_l1", 0x2004, "V", 0.1, "Volts_CA"),
+    _f32("voltage_l1", 0x2006, "V", 0.1, "Volts_L1"),
+    _f32("voltage_l2", 0x2008, "V", 0.1, "Volts_L2"),
+    _f32("voltage_l3", 0x200A, "V", 0.1, "Volts_L3"),
+    _f32("current_l1", 0x200C, "A", 0.001, "Current_L1"),
+    _f32("current_l2", 0x200E, "A", 0.001, "Current_L2"),
+    _f32("current_l3", 0x2010, "A", 0.001, "Current_L3"),
+    _f32("power", 0x2012, "W", 0.1, "Total_System_Active_Power"),
+    _f32("power_l1", 0x2014, "W", 0.1, "Active_Power_L1"),
+    _f32("power_l2", 0x2016, "W", 0.1, "Active_Power_L2"),
+    _f32("power_l3", 0x2018, "W", 0.1, "Active_Power_L3"),
+    _f32("reactive_power", 0x201A, "var", 0.1, "Total_System_Reactive_Power"),
+    _f32("reactive_power_l1", 0x201C, "var", 0.1, "Reactive_Power_L1"),
+    _f32("reactive_power_l2", 0x201E, "var", 0.1, "Reactive_Power_L2"),
+    _f32("reactive_power_l3", 0x2020, "var", 0.1, "Reactive_Power_L3"),
+    _f32("power_factor", 0x202A, "", 0.1, "Total_System_Power_Factor"),
+    _f32("power_factor_l1", 0x202C, "", 0.001, "Power_Factor_L1"),
+    _f32("power_factor_l2", 0x202E, "", 0.001, "Power_Factor_L2"),
+    _f32("power_factor_l3", 0x2030, "", 0.001, "Power_Factor_L3"),
+    _f32("frequency", 0x2044, "Hz", 0.01, "Frequency_Of_Supply_Voltages"),
+    _f32("energy_import", 0x401E, "kWh", 1.0, "Total_import_kwh"),
+    _f32("energy_export", 0x4028, "kWh", 1.0, "Total_export_kwh"),
+)
+
 DTSU666 = (
     SourceDefinition(
         device="chint_dtsu666",
@@ -124,6 +153,21 @@ DTSU666 = (
             "power factor goes 1:1 into an integer channel without unit: OpenEMS keeps "
             "the raw per-mille value (scale 1 here, mbmd 0.001)",
             "reads in three blocks: 0x2006-0x2019, 0x202a-0x202b, 0x2044-0x2045, plus 0x4000",
+        ),
+    ),
+    SourceDefinition(
+        device="chint_dtsu666",
+        source="community:wschoenell/solariot",
+        ref="wschoenell/solariot@24f9b14aca94a2afece9a1c2b519a5218aa1bb26:dtsu666_meter.py",
+        points=SOLARIOT_DTSU666,
+        notes=(
+            "reads the energy counters at 0x401e (import) and 0x4028 (export), where mbmd "
+            "reads 0x101e and 0x1028 and OpenEMS reads one counter at 0x4000",
+            "it picks each scale by matching the value's name: the total power factor "
+            "(0x202a) falls under the power rule (x0.1) where the phase power factors get "
+            "x0.001",
+            "also reads four reactive quadrant counters from 0x4028 (Q1, the same register as "
+            "its export counter) to 0x4050, no library key",
         ),
     ),
 )
