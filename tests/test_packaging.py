@@ -18,3 +18,17 @@ def test_every_package_of_bridge_is_in_the_wheel() -> None:
         for init in (ROOT / "bridge").rglob("__init__.py")
     }
     assert found - listed == set(), f"packages missing from pyproject.toml: {found - listed}"
+
+
+def test_every_shipped_mapping_is_package_data() -> None:
+    """The seeds and mappings/library/<category>/*.yaml ship inside the wheel (the Docker
+    image and the add-on install the wheel): each file matches a package-data pattern."""
+    globs = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-data"
+    ]["bridge.mappings"]
+    files = sorted((ROOT / "mappings").rglob("*.yaml"))
+    for path in files:
+        relative = path.relative_to(ROOT / "mappings")
+        assert any(
+            relative.match(glob) and len(relative.parts) == len(Path(glob).parts) for glob in globs
+        ), relative
