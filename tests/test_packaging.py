@@ -32,3 +32,18 @@ def test_every_shipped_mapping_is_package_data() -> None:
         assert any(
             relative.match(glob) and len(relative.parts) == len(Path(glob).parts) for glob in globs
         ), relative
+
+
+def test_every_library_folder_is_a_listed_package() -> None:
+    """setuptools takes a folder of data under a package for a package of its own: each
+    mappings/library/<category>/ is listed (as bridge.mappings.library.<category>), or the
+    wheel build warns that it "would be ignored"."""
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    folders = {path.parent for path in (ROOT / "mappings").rglob("*.yaml")}
+    folders |= {parent for folder in folders for parent in folder.parents}
+    for folder in folders:
+        if folder.is_relative_to(ROOT / "mappings"):
+            parts = folder.relative_to(ROOT / "mappings").parts
+            assert ".".join(("bridge", "mappings", *parts)) in listed, folder
