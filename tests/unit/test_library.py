@@ -146,3 +146,19 @@ def test_a_duplicate_name_is_an_error_naming_both_files(
     message = str(refused.value)
     assert str(folder.resolve() / "library" / "inverter" / "acme_m1.yaml") in message
     assert str(folder.resolve() / "library" / "meter" / "acme_m1.yaml") in message
+
+
+def test_a_library_meter_is_named_in_a_config_like_a_seed(tmp_path: Path) -> None:
+    data = {
+        "mqtt": {"url": "mqtt://127.0.0.1:1883"},
+        "buses": [{"id": "line", "transport": "rtu", "port": "/dev/ttyUSB0"}],
+        "devices": [
+            {"id": "grid", "bus": "line", "unit": 1, "mapping": "eastron_sdm630"},
+            {"id": "pump", "bus": "line", "unit": 2, "mapping": "nastec_vasco"},
+        ],
+    }
+    loaded = load_config_data(data, tmp_path / "config.yaml")
+    assert loaded.mappings["grid"].model == "SDM630-Modbus V2"
+    assert resolve_mapping_path("eastron_sdm630") == (
+        mappings_folder() / "library" / "meter" / "eastron_sdm630.yaml"
+    )
