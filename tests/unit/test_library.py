@@ -162,3 +162,15 @@ def test_a_library_meter_is_named_in_a_config_like_a_seed(tmp_path: Path) -> Non
     assert resolve_mapping_path("eastron_sdm630") == (
         mappings_folder() / "library" / "meter" / "eastron_sdm630.yaml"
     )
+
+
+def test_a_shipped_mapping_without_its_index_entry_breaks_a_convention() -> None:
+    text = (METER % ("voltage", "mbmd")).split("library:")[0] + "entities:" + (
+        METER.split("entities:")[1]
+    )
+    report = check_mapping_text(text, "m1.yaml", library=True)
+    assert report.errors == ()
+    assert report.warnings == (
+        "library: a shipped mapping has its index entry (docs/mappings.md, Library)",
+    )
+    assert check_mapping_text(text, "m1.yaml").warnings == ()  # a user's own: nothing
