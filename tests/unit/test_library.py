@@ -165,8 +165,10 @@ def test_a_library_meter_is_named_in_a_config_like_a_seed(tmp_path: Path) -> Non
 
 
 def test_a_shipped_mapping_without_its_index_entry_breaks_a_convention() -> None:
-    text = (METER % ("voltage", "mbmd")).split("library:")[0] + "entities:" + (
-        METER.split("entities:")[1]
+    text = (
+        (METER % ("voltage", "mbmd")).split("library:")[0]
+        + "entities:"
+        + (METER.split("entities:")[1])
     )
     report = check_mapping_text(text, "m1.yaml", library=True)
     assert report.errors == ()
