@@ -1,6 +1,7 @@
-"""Eastron SDM meters as volkszaehler/mbmd and evcc-io/evcc read them (facts only).
+"""Eastron SDM meters as mbmd, evcc, OpenEMS, Tasmota and openWB read them (facts only).
 
-All SDM values are IEEE 754 float32, high word first, in input registers, at scale 1.
+All SDM values are IEEE 754 float32, high word first, in input registers, at scale 1
+(one source reads the SDM630 frequency at another: see its notes).
 """
 
 from __future__ import annotations
@@ -13,7 +14,12 @@ from tests.library.sources.upstream import (
     EVCC_PINS_MBMD,
     EVCC_PV,
     MBMD,
+    OPENEMS,
+    OPENEMS_CONVENTION,
+    OPENWB,
+    TASMOTA_STYLE,
     pick,
+    tasmota_ref,
 )
 
 
@@ -151,6 +157,137 @@ MBMD_SDM72V2 = (
 )
 
 
+# io.openems.edge.meter.eastron/.../sdm630/MeterEastronSdm630Impl.java (one block, function 4)
+OPENEMS_SDM630 = (
+    _f32("voltage_l1", 0x0000, "V", "VOLTAGE_L1"),
+    _f32("voltage_l2", 0x0002, "V", "VOLTAGE_L2"),
+    _f32("voltage_l3", 0x0004, "V", "VOLTAGE_L3"),
+    _f32("current_l1", 0x0006, "A", "CURRENT_L1"),
+    _f32("current_l2", 0x0008, "A", "CURRENT_L2"),
+    _f32("current_l3", 0x000A, "A", "CURRENT_L3"),
+    _f32("power_l1", 0x000C, "W", "ACTIVE_POWER_L1"),
+    _f32("power_l2", 0x000E, "W", "ACTIVE_POWER_L2"),
+    _f32("power_l3", 0x0010, "W", "ACTIVE_POWER_L3"),
+    _f32("reactive_power_l1", 0x0018, "var", "REACTIVE_POWER_L1"),
+    _f32("reactive_power_l2", 0x001A, "var", "REACTIVE_POWER_L2"),
+    _f32("reactive_power_l3", 0x001C, "var", "REACTIVE_POWER_L3"),
+    _f32("current_sum", 0x0030, "A", "CURRENT"),
+    _f32("power", 0x0034, "W", "ACTIVE_POWER"),
+    _f32("reactive_power", 0x003C, "var", "REACTIVE_POWER"),
+    SourcePoint("frequency", "input", 0x0046, "f32", "Hz", 0.001, name="FREQUENCY"),
+    _f32("reactive_energy_import", 0x004C, "kvarh", "REACTIVE_PRODUCTION_ENERGY"),
+    _f32("reactive_energy_export", 0x004E, "kvarh", "REACTIVE_CONSUMPTION_ENERGY"),
+)
+
+# io.openems.edge.meter.eastron/.../sdm120/MeterEastronSdm120Impl.java (one block, function 4)
+OPENEMS_SDM120 = (
+    _f32("voltage", 0x0000, "V", "VOLTAGE"),
+    _f32("current", 0x0006, "A", "CURRENT"),
+    _f32("power", 0x000C, "W", "ACTIVE_POWER"),
+    _f32("reactive_power", 0x0018, "var", "REACTIVE_POWER"),
+    _f32("frequency", 0x0046, "Hz", "FREQUENCY"),
+)
+
+# xnrg_10_sdm630.ino (default build)
+TASMOTA_SDM630 = (
+    _f32("voltage_l1", 0x0000, "V", "voltage[0]"),
+    _f32("voltage_l2", 0x0002, "V", "voltage[1]"),
+    _f32("voltage_l3", 0x0004, "V", "voltage[2]"),
+    _f32("current_l1", 0x0006, "A", "current[0]"),
+    _f32("current_l2", 0x0008, "A", "current[1]"),
+    _f32("current_l3", 0x000A, "A", "current[2]"),
+    _f32("power_l1", 0x000C, "W", "active_power[0]"),
+    _f32("power_l2", 0x000E, "W", "active_power[1]"),
+    _f32("power_l3", 0x0010, "W", "active_power[2]"),
+    _f32("reactive_power_l1", 0x0018, "var", "reactive_power[0]"),
+    _f32("reactive_power_l2", 0x001A, "var", "reactive_power[1]"),
+    _f32("reactive_power_l3", 0x001C, "var", "reactive_power[2]"),
+    _f32("power_factor_l1", 0x001E, "", "power_factor[0]"),
+    _f32("power_factor_l2", 0x0020, "", "power_factor[1]"),
+    _f32("power_factor_l3", 0x0022, "", "power_factor[2]"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import_l1", 0x015A, "kWh", "import_active[0]"),
+    _f32("energy_import_l2", 0x015C, "kWh", "import_active[1]"),
+    _f32("energy_import_l3", 0x015E, "kWh", "import_active[2]"),
+    _f32("energy_export_l1", 0x0160, "kWh", "export_active[0]"),
+    _f32("energy_export_l2", 0x0162, "kWh", "export_active[1]"),
+    _f32("energy_export_l3", 0x0164, "kWh", "export_active[2]"),
+)
+
+# xnrg_08_sdm120.ino (one driver for SDM120 and SDM220)
+TASMOTA_SDM120 = (
+    _f32("voltage", 0x0000, "V", "voltage"),
+    _f32("current", 0x0006, "A", "current"),
+    _f32("power", 0x000C, "W", "active_power"),
+    _f32("apparent_power", 0x0012, "VA", "apparent_power"),
+    _f32("reactive_power", 0x0018, "var", "reactive_power"),
+    _f32("power_factor", 0x001E, "", "power_factor"),
+    _f32("phase_angle", 0x0024, "°", "phase_angle"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "import_active"),
+    _f32("energy_export", 0x004A, "kWh", "export_active"),
+    _f32("reactive_energy_import", 0x004C, "kvarh", "import_reactive"),
+    _f32("reactive_energy_export", 0x004E, "kvarh", "export_reactive"),
+    _f32("energy_total", 0x0156, "kWh", "total_active"),
+)
+
+# xnrg_21_sdm230.ino (default build)
+TASMOTA_SDM230 = (
+    _f32("voltage", 0x0000, "V", "voltage"),
+    _f32("current", 0x0006, "A", "current"),
+    _f32("power", 0x000C, "W", "active_power"),
+    _f32("apparent_power", 0x0012, "VA", "apparent_power"),
+    _f32("reactive_power", 0x0018, "var", "reactive_power"),
+    _f32("power_factor", 0x001E, "", "power_factor"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "import_active"),
+    _f32("energy_export", 0x004A, "kWh", "export_active"),
+)
+
+# xnrg_18_sdm72.ino (default build)
+TASMOTA_SDM72 = (
+    _f32("power", 0x0034, "W", "active_power"),
+    _f32("energy_total", 0x0156, "kWh", "total_active"),
+)
+
+# packages/modules/common/sdm.py: class Sdm630_72 (SDM630 and SDM72) and class Sdm120
+OPENWB_SDM630_72 = (
+    _f32("voltage_l1", 0x0000, "V", "voltages[0]"),
+    _f32("voltage_l2", 0x0002, "V", "voltages[1]"),
+    _f32("voltage_l3", 0x0004, "V", "voltages[2]"),
+    _f32("current_l1", 0x0006, "A", "currents[0]"),
+    _f32("current_l2", 0x0008, "A", "currents[1]"),
+    _f32("current_l3", 0x000A, "A", "currents[2]"),
+    _f32("power_l1", 0x000C, "W", "powers[0]"),
+    _f32("power_l2", 0x000E, "W", "powers[1]"),
+    _f32("power_l3", 0x0010, "W", "powers[2]"),
+    _f32("power_factor_l1", 0x001E, "", "power_factors[0]"),
+    _f32("power_factor_l2", 0x0020, "", "power_factors[1]"),
+    _f32("power_factor_l3", 0x0022, "", "power_factors[2]"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "imported"),
+    _f32("energy_export", 0x004A, "kWh", "exported"),
+)
+OPENWB_SDM120 = (
+    _f32("voltage", 0x0000, "V", "voltages[0]"),
+    _f32("current", 0x0006, "A", "currents[0]"),
+    _f32("power", 0x000C, "W", "power"),
+    _f32("power_factor", 0x001E, "", "power_factors[0]"),
+    _f32("frequency", 0x0046, "Hz", "frequency"),
+    _f32("energy_import", 0x0048, "kWh", "imported"),
+    _f32("energy_export", 0x004A, "kWh", "exported"),
+)
+OPENWB_NOTES = (
+    "a frequency above 100 is divided by 10 (a guard for meters that report 0.1 Hz)",
+    "also reads the serial number (holding 0xfc00, u32), no entity key",
+)
+OPENWB_3P = (
+    *OPENWB_NOTES,
+    "class Sdm630_72 for the SDM630 and the SDM72: blocks 0x00-0x11, 0x1e-0x23, "
+    "0x46-0x4b, one read per group after a failed block read",
+    "total power is the sum of the phase powers, 0x34 is not read",
+)
+
 SDM630 = (
     SourceDefinition(
         device="eastron_sdm630",
@@ -168,6 +305,39 @@ SDM630 = (
         ref=f"{EVCC}:templates/definition/meter/eastron-sdm72v2_630.yaml",
         points=pick(MBMD_SDM630, EVCC_3P),
         notes=("evcc delegates to mbmd (type mbmd, model sdm)", EVCC_PINS_MBMD, EVCC_PV, EVCC_NAN),
+    ),
+    SourceDefinition(
+        device="eastron_sdm630",
+        source="openems",
+        ref=f"{OPENEMS}:io.openems.edge.meter.eastron/src/io/openems/edge/meter/eastron/"
+        "sdm630/MeterEastronSdm630Impl.java",
+        points=OPENEMS_SDM630,
+        notes=(
+            OPENEMS_CONVENTION,
+            "frequency 0x46 goes 1:1 into OpenEMS's mHz channel (no factor 1000, unlike its "
+            "SDM120), so OpenEMS takes the float for mHz: scale 0.001 Hz here",
+            "0x30 is the sum of the line currents (key current_sum)",
+            "OpenEMS reads no active energy register: it integrates power itself",
+            "a phase-rotation option may reassign L1..L3 (default L1, L2, L3)",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm630",
+        source="tasmota",
+        ref=tasmota_ref("38f1a33d38eb091b81003a407d810acab27a8af3", "xnrg_10_sdm630.ino"),
+        points=TASMOTA_SDM630,
+        notes=(
+            TASMOTA_STYLE,
+            "it also reads 0x156 (total energy) but leaves it unused; a high-rate build option "
+            "reads 0x00-0x23, 0x46 and 0x156-0x165 in three blocks instead",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm630",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/common/sdm.py",
+        points=OPENWB_SDM630_72,
+        notes=OPENWB_3P,
     ),
 )
 
@@ -193,6 +363,35 @@ SDM120 = (
             "with usage pv it negates power",
         ),
     ),
+    SourceDefinition(
+        device="eastron_sdm120",
+        source="openems",
+        ref=f"{OPENEMS}:io.openems.edge.meter.eastron/src/io/openems/edge/meter/eastron/"
+        "sdm120/MeterEastronSdm120Impl.java",
+        points=OPENEMS_SDM120,
+        notes=(
+            OPENEMS_CONVENTION,
+            "OpenEMS reads no energy register: it integrates power itself",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm120",
+        source="tasmota",
+        ref=tasmota_ref("4001f875cc5ea13d6b14f3ffba090dddbc768226", "xnrg_08_sdm120.ino"),
+        points=TASMOTA_SDM120,
+        notes=(
+            TASMOTA_STYLE,
+            "when import 0x48 reads NaN (older SDM120) it stops reading 0x48-0x4e and 0x24 "
+            "and counts the total 0x156 as import",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm120",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/common/sdm.py",
+        points=OPENWB_SDM120,
+        notes=(*OPENWB_NOTES, "class Sdm120: blocks 0x00-0x0d, 0x1e-0x1f, 0x46-0x4b"),
+    ),
 )
 
 SDM230 = (
@@ -213,6 +412,16 @@ SDM230 = (
             EVCC_PINS_MBMD,
             EVCC_PV,
             EVCC_NAN,
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm230",
+        source="tasmota",
+        ref=tasmota_ref("115105bf7c7b1bcdc783f90bb226d340f1e6d3b1", "xnrg_21_sdm230.ino"),
+        points=TASMOTA_SDM230,
+        notes=(
+            TASMOTA_STYLE,
+            "a build option adds phase angle 0x24, max total demand 0x56, resettable total 0x180",
         ),
     ),
 )
@@ -242,6 +451,24 @@ SDM72D_M = (
             EVCC_PV,
             EVCC_NAN,
         ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm72d_m",
+        source="tasmota",
+        ref=tasmota_ref("0446e08613d1507423ab5ff3a80d9281c6ab452f", "xnrg_18_sdm72.ino"),
+        points=TASMOTA_SDM72,
+        notes=(
+            TASMOTA_STYLE,
+            "one driver for the SDM72 (no v1/v2 split); it counts the total 0x156 as import",
+            "a build option adds import power 0x500, export power 0x502, import 0x48, export 0x4a",
+        ),
+    ),
+    SourceDefinition(
+        device="eastron_sdm72d_m",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/common/sdm.py",
+        points=OPENWB_SDM630_72,
+        notes=OPENWB_3P,
     ),
 )
 

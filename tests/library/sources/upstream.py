@@ -35,3 +35,30 @@ def pick(points: tuple[SourcePoint, ...], keys: tuple[str, ...]) -> tuple[Source
     """The points with these keys, in the order of keys (KeyError if one is missing)."""
     by_key = {p.key: p for p in points}
     return tuple(by_key[k] for k in keys)
+
+
+OPENEMS = "OpenEMS/openems@0e4ea8881f78f46b6a7cd05ce570c35de334c113"
+OPENEMS_CONVENTION = (
+    "OpenEMS converts into its own channel units (mV, mA, W, var, mHz, Wh) and counts "
+    "'production' energy while its active power is positive and 'consumption' while it is "
+    "negative; invert (a config flag, default off) flips both; keys here assume it is off"
+)
+
+TASMOTA_STYLE = (
+    "Tasmota's driver sends one 2-register read per value in a cycle (float32 high word "
+    "first); only what the default build reads is listed"
+)
+
+
+def tasmota_ref(commit: str, file: str) -> str:
+    """The ref of one Tasmota energy driver file at one commit."""
+    return f"arendst/Tasmota@{commit}:tasmota/tasmota_xnrg_energy/{file}"
+
+
+OPENWB = "openWB/core@3039a21010759129b7dd182df0e7e183fed28baa"
+
+VICTRON = "victronenergy/dbus-modbus-client@fe12d8c9c30fab4310e16c10bbec0ced4ca9926f"
+VICTRON_STYLE = (
+    "Victron's dbus-modbus-client reads holding registers (function 3), packing nearby "
+    "registers into block reads"
+)
