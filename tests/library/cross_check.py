@@ -37,6 +37,7 @@ _PLAUSIBLE = {
     "kWh": (0.0, 1e6),
     "Wh": (0.0, 1e9),
     "kvarh": (0.0, 1e6),
+    "kVAh": (0.0, 1e6),
     "%": (0.0, 100.0),
     "": (-1.0, 1.0),
     "°": (-180.0, 180.0),
@@ -55,6 +56,7 @@ _FACTORS = {
     ("kvarh", "varh"): 1e3,
     ("varh", "kvarh"): 1e-3,
 }
+_FLOATS = {"f32": ">f", "f64": ">d"}  # struct formats, high byte first
 _INTEGERS = {"u16": (0, 0xFFFF), "s16": (-0x8000, 0x7FFF), "u32": (0, 0xFFFFFFFF)}
 _INTEGERS |= {"s32": (-(1 << 31), (1 << 31) - 1), "u64": (0, (1 << 64) - 1)}
 _INTEGERS |= {"s64": (-(1 << 63), (1 << 63) - 1)}
@@ -150,7 +152,7 @@ def plausible_raw(point: SourcePoint, rng: random.Random) -> float | int:
     """A raw value (before the source's scale) whose engineering value is plausible."""
     low, high = _PLAUSIBLE[point.unit]
     value = rng.uniform(low, high)
-    if point.type == "f32":
+    if point.type in _FLOATS:
         return value / point.scale
     least, most = _INTEGERS[point.type]
     return max(least, min(most, round(value / point.scale)))
@@ -158,8 +160,8 @@ def plausible_raw(point: SourcePoint, rng: random.Random) -> float | int:
 
 def source_words(point: SourcePoint, raw: float | int) -> dict[tuple[Table, int], int]:
     """The registers holding ``raw`` as the source lays it out."""
-    if point.type == "f32":
-        data = struct.pack(">f", raw)
+    if point.type in _FLOATS:
+        data = struct.pack(_FLOATS[point.type], raw)
     else:
         signed = point.type.startswith("s")
         data = int(raw).to_bytes(2 * width(point), "big", signed=signed)
@@ -177,8 +179,8 @@ def source_value(point: SourcePoint, image: dict[tuple[Table, int], int]) -> flo
     if point.word_order == "little":
         words.reverse()
     data = b"".join(word.to_bytes(2, "big") for word in words)
-    if point.type == "f32":
-        raw: float = struct.unpack(">f", data)[0]
+    if point.type in _FLOATS:
+        raw: float = struct.unpack(_FLOATS[point.type], data)[0]
     else:
         raw = int.from_bytes(data, "big", signed=point.type.startswith("s"))
     return raw * point.scale

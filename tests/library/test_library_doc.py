@@ -6,6 +6,8 @@ from pathlib import Path
 
 from bridge.core.mapping import shipped_library
 from tests.factory import make_mapping
+from tests.library.cross_check import compare
+from tests.library.sources import SOURCES
 from tools.library_doc import REGENERATE, render_library_doc
 
 ROOT = Path(__file__).resolve().parent.parent.parent
@@ -32,9 +34,18 @@ def test_every_shipped_mapping_has_one_row_under_its_category_and_manufacturer()
 
 
 def test_counts_and_choices_come_from_the_cross_check() -> None:
-    row = next(line for line in render_library_doc().splitlines() if "`eastron_sdm630`" in line)
+    text = render_library_doc()
+    mapping = shipped_library()["eastron_sdm630"]
+    row = next(line for line in text.splitlines() if "`eastron_sdm630`" in line)
     cells = [cell.strip() for cell in row.strip("|").split("|")]
-    assert cells[5:8] == ["mbmd, evcc", "mbmd 52, evcc 12", "0"]
+    comparisons = [compare(mapping, d) for d in SOURCES["eastron_sdm630"]]
+    assert cells[5] == ", ".join(c.source for c in comparisons)
+    assert cells[6] == ", ".join(f"{c.source} {c.compared}" for c in comparisons)
+    assert all(c.compared > 0 for c in comparisons)
+    assert cells[7] == str(sum(len(c.differences) for c in comparisons)) == "2"
+    assert mapping.library is not None
+    for row_ in mapping.library.disagreements:
+        assert f"- `{row_.entity}` ({', '.join(row_.sources)}): " in text
 
 
 def test_a_disagreement_is_listed_with_its_choice() -> None:
