@@ -94,6 +94,18 @@ def test_mappings_show_prints_the_index_entry_and_fingerprint(
     assert any(line.startswith("  probe ") for line in out)
 
 
+def test_mappings_show_prints_a_library_meters_disagreements(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["mappings", "show", "eastron_sdm630"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "category: meter" in out
+    assert any(line.startswith("document: Eastron SDM630Modbus") and "V1.8" in line for line in out)
+    assert any(line.startswith("disagreement frequency (openems): ") for line in out)
+    row = next(line for line in out if line.startswith("current_l1 "))
+    assert row.split()[:5] == ["current_l1", "0x0006", "6", "(0x0006)", "input"]
+
+
 def test_mappings_show_prints_printed_and_wire_address(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["mappings", "show", "nastec_vasco"]) == 0
     line = next(

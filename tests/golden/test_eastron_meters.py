@@ -13,6 +13,7 @@ import re
 
 import pytest
 
+from bridge.core.codec import encode
 from bridge.core.entity import Table
 from bridge.core.mapping import builtin_mapping_path
 from bridge.core.planner import limits_for, plan_reads
@@ -84,3 +85,12 @@ def test_every_comment_names_the_documents_register_number(name: str) -> None:
     for wire, printed in rows:
         base = 30001 if printed.startswith("3") else 40001
         assert int(wire, 16) + base == int(printed), (wire, printed)
+
+
+def test_the_demand_period_is_written_with_fc16_as_a_float() -> None:
+    """1.3: "Each parameter is held in two consecutive 4X registers ... Function Code 16 is
+    used to write"; 15 minutes is the float 0x41700000."""
+    point = POINTS["demand_period"]
+    assert not point.entity.dangerous
+    (write,) = encode(point, 15, {})
+    assert build_frame(write, 1) == with_crc("01 10 00 02 00 02 04 41 70 00 00")

@@ -41,6 +41,7 @@ STATUS = {  # the simulated device is running and healthy
     "vacon_nx": True,
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
+    "eastron_sdm630": ("demand_period", 15),
     "nastec_vasco": ("operating_frequency", 40),
     "p2_vfd": ("max_output_frequency", 60.5),
     "soft_starter": ("soft_start_time", 20),
