@@ -33,6 +33,7 @@ HEADERS = (
     "Points compared",
     "Disagreements",
     "Confidence",
+    "`identify`",
 )
 
 
@@ -49,6 +50,8 @@ def render_library_doc(library: dict[str, Mapping] | None = None) -> str:
         "facts transcribed as data), the points it shares with the mapping that",
         "tests/library/test_cross_check.py decodes from one register image both ways;",
         "each *disagreement* is listed below its table with the choice made and why.",
+        "*`identify`* says whether `modbus-mqtt-bridge identify` can name the model",
+        "(a device code or ID string) or only say a unit answers like it.",
         "",
         _summary(mappings),
     ]
@@ -97,6 +100,7 @@ def _cells(name: str, mapping: Mapping) -> list[str]:
         compared or "0",
         str(disagreements),
         library.confidence if library is not None else "",
+        _identify(mapping),
     ]
 
 
@@ -117,6 +121,14 @@ def _document(mapping: Mapping) -> str:
     source = mapping.source
     title = f"{source.title} {source.version}" if source.version else source.title
     return f"[{_cell(title)}]({source.url})" if source.url else _cell(title)
+
+
+def _identify(mapping: Mapping) -> str:
+    """What ``identify`` can say of a unit of this model: its fingerprint's strength."""
+    found = mapping.fingerprint
+    if found is None:
+        return "no fingerprint"
+    return "identifies" if found.identifies else "answers like"
 
 
 def _category(mapping: Mapping) -> Category | None:

@@ -57,6 +57,8 @@ def test_a_disagreement_is_listed_with_its_choice() -> None:
     }
     meter = make_mapping(entities, protocol={"function_codes": [4]}, library=library)
     text = render_library_doc({"acme_m1": meter})
-    assert text.splitlines()[10] == "1 devices (meter: 1)."
+    assert "\n1 devices (meter: 1).\n" in text
     assert "- `power` (mbmd): the manual \\| wins" in text
-    assert "| T1 | `acme_m1` |  | rtu | test manual | none | 0 | 0 | medium |" in text
+    assert (
+        "| T1 | `acme_m1` |  | rtu | test manual | none | 0 | 0 | medium | no fingerprint |" in text
+    )
