@@ -106,6 +106,14 @@ def test_mappings_show_prints_a_library_meters_disagreements(
     assert row.split()[:5] == ["current_l1", "0x0006", "6", "(0x0006)", "input"]
 
 
+@pytest.mark.parametrize("ref", ["SDM630", "sdm-630", "SDM630-Modbus V2"])
+def test_mappings_show_finds_a_model_by_an_alias(
+    ref: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["mappings", "show", ref]) == 0
+    assert capsys.readouterr().out.startswith("Eastron SDM630-Modbus V2: ")
+
+
 def test_mappings_show_prints_printed_and_wire_address(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["mappings", "show", "nastec_vasco"]) == 0
     line = next(

@@ -18,7 +18,7 @@ from typing import TextIO
 
 from bridge import __version__
 from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
-from bridge.cli.mapping_view import print_fingerprint, print_header
+from bridge.cli.mapping_view import named, print_fingerprint, print_header
 from bridge.config import config_schema, load_config
 from bridge.core.address import format_address
 from bridge.core.entity import Entity
@@ -27,6 +27,7 @@ from bridge.core.mapping import (
     Mapping,
     check_mapping_file,
     in_library,
+    library_index,
     load_mapping,
     mapping_schema,
     resolve_mapping_path,
@@ -114,7 +115,9 @@ def _parser(command: str | None = None) -> argparse.ArgumentParser:
     show = actions.add_parser(
         "show", help="a mapping's index entry, entities with wire addresses, fingerprint"
     )
-    show.add_argument("name", help="shipped mapping name or path to a YAML file")
+    show.add_argument(
+        "name", help="shipped mapping name, its model or an alias (SDM630), or a YAML file"
+    )
     show.add_argument(
         "-o",
         "--option",
@@ -196,7 +199,10 @@ def _list(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def _show(args: argparse.Namespace, out: TextIO) -> int:
-    mapping = load_mapping(resolve_mapping_path(args.name, Path.cwd()))
+    ref = args.name
+    if ref not in library_index() and not Path(ref).is_file():
+        ref = named(ref) or ref  # a model or an alias: SDM630
+    mapping = load_mapping(resolve_mapping_path(ref, Path.cwd()))
     options = _parse_options(args.option, mapping)
     print_header(mapping, out)
     for name, spec in mapping.options.items():

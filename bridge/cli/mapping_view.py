@@ -1,12 +1,37 @@
 """What ``mappings show`` prints around the entities table: the mapping's index entry
-(document, category, aliases, transports, sources, disagreements) and its fingerprint."""
+(document, category, aliases, transports, sources, disagreements) and its fingerprint;
+and which shipped mapping a model name or alias means (``named``)."""
 
 from __future__ import annotations
 
 from typing import TextIO
 
 from bridge.core.fingerprint import Probe
-from bridge.core.mapping import Mapping
+from bridge.core.mapping import Mapping, shipped_library
+from bridge.errors import MappingError
+
+
+def named(ref: str) -> str | None:
+    """The shipped mapping whose model or one of whose aliases is ``ref`` (case and
+    spaces, dashes ignored): ``SDM630`` is ``eastron_sdm630``. None when none is; an error
+    naming them when several are."""
+    wanted = _plain(ref)
+    found = [
+        name
+        for name, mapping in shipped_library().items()
+        if wanted in {_plain(mapping.model), *(_plain(a) for a in _aliases(mapping))}
+    ]
+    if len(found) > 1:
+        raise MappingError(ref, [f"several shipped mappings are called so: {', '.join(found)}"])
+    return found[0] if found else None
+
+
+def _aliases(mapping: Mapping) -> tuple[str, ...]:
+    return mapping.library.aliases if mapping.library is not None else ()
+
+
+def _plain(text: str) -> str:
+    return "".join(c for c in text.lower() if c.isalnum())
 
 
 def print_header(mapping: Mapping, out: TextIO) -> None:

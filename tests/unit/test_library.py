@@ -176,3 +176,14 @@ def test_a_shipped_mapping_without_its_index_entry_breaks_a_convention() -> None
         "library: a shipped mapping has its index entry (docs/mappings.md, Library)",
     )
     assert check_mapping_text(text, "m1.yaml").warnings == ()  # a user's own: nothing
+
+
+def test_no_two_shipped_mappings_answer_to_one_name() -> None:
+    """A model or an alias (case, spaces and dashes ignored) names one mapping, so
+    ``mappings show SDM630`` is never ambiguous."""
+    owners: dict[str, str] = {}
+    for name, mapping in shipped_library().items():
+        assert mapping.library is not None
+        for alias in {mapping.model, *mapping.library.aliases}:
+            plain = "".join(c for c in alias.lower() if c.isalnum())
+            assert owners.setdefault(plain, name) == name, (alias, owners[plain], name)
