@@ -236,7 +236,18 @@ def _place(
             inner = _place(child, at, (*path, (child.name, index + 1 if repeats else 0)), sizing)
             placed.extend(inner)
             at = inner[-1].offset + inner[-1].point.size if inner else at
+            if at > sizing.length + HEADER or (repeats and not inner):
+                # counts a device read that the length cannot hold: stop at once (a count
+                # of 65535 curves of 65535 points is not laid out before it is refused)
+                raise ModelDefinitionError(
+                    f"SunSpec model {sizing.model.id}: its counts ({_shown(sizing.counts)}) "
+                    f"need more than L {sizing.length}"
+                )
     return tuple(placed)
+
+
+def _shown(counts: Mapping[str, int]) -> str:
+    return ", ".join(f"{name} {value}" for name, value in sorted(counts.items())) or "none"
 
 
 def _count_points(group: GroupDef) -> set[str]:

@@ -14,6 +14,9 @@ ceil(66 / read_limit)`` (``request_bound``; the 2: an end marker whose L is refu
 again alone, and the common model's body). Of a common model longer than its definition
 only the definition's 66 registers are read.
 
+``await read_chain(read, chain)`` then reads every register of the walked models (what
+the mapping builder needs of a device), one request per model where the read limit allows.
+
 The walk refuses what a device cannot mean: a chain that runs past register 65535
 (addresses only grow, so that is also the only way a chain can loop), more than
 ``max_models`` models or ``max_registers`` registers, a model ID of 0, an answer shorter
@@ -126,6 +129,22 @@ async def walk(read: Read, bases: Sequence[int] = BASES, limits: WalkLimits | No
             return Chain(base, models, common, counted.requests)
     tried = ", ".join(str(b) for b in bases)
     raise NotSunSpecError(f"no SunSpec marker at {tried} ({counted.requests} requests)")
+
+
+async def read_chain(read: Read, chain: Chain, read_limit: int = 125) -> dict[int, int]:
+    """Every register of the chain's models (ID, L and body), address -> word, in reads of
+    at most ``read_limit``: what ``bridge.sunspec.mapping.build_mapping`` needs of a
+    device (the points that count a model's groups, a module's IDStr). Requests:
+    ``ceil((L + 2) / read_limit)`` per model; a short answer is refused
+    (SunSpecChainError), a refused read raises the read's own error."""
+    if read_limit < 1:
+        raise ValueError(f"read_limit {read_limit}: at least 1")
+    counted = _Counted(read, read_limit)
+    words: dict[int, int] = {}
+    for model in chain.models:
+        span = await counted.span(model.address, model.end - model.address)
+        words.update(zip(range(model.address, model.end), span, strict=True))
+    return words
 
 
 class _Counted:
