@@ -23,7 +23,7 @@ from tests.golden.frames import decoded, hexbytes, image_from, read_of, shipped
 
 SDM630 = shipped("eastron_sdm630")
 POINTS = SDM630.points()
-METERS = ["eastron_sdm630", "eastron_sdm120"]
+METERS = ["eastron_sdm630", "eastron_sdm120", "eastron_sdm230"]
 
 
 def crc16_modbus(data: bytes) -> bytes:
