@@ -1,4 +1,4 @@
-"""Golden frames of the Eastron SDM630 and SDM120 mappings (SDM630 protocol V1.8, 1.1-1.2).
+"""Golden frames of the Eastron meter mappings (SDM630 protocol V1.8, 1.1-1.2; SDM72D-M manual).
 
 The document's own example (Amps 1: start 0006, 2 registers; Amps 2: start 0008) is built
 from the mapping's points, its CRC checked against CRC-16/MODBUS computed here; replies
@@ -23,7 +23,7 @@ from tests.golden.frames import decoded, hexbytes, image_from, read_of, shipped
 
 SDM630 = shipped("eastron_sdm630")
 POINTS = SDM630.points()
-METERS = ["eastron_sdm630", "eastron_sdm120"]
+METERS = ["eastron_sdm630", "eastron_sdm120", "eastron_sdm230", "eastron_sdm72d_m"]
 
 
 def crc16_modbus(data: bytes) -> bytes:
@@ -46,6 +46,14 @@ def test_the_documents_example_requests(key: str, start: int) -> None:
     read = read_of(POINTS, key)
     assert read == Read(Table.INPUT, start, 2)
     assert build_frame(read, 1) == with_crc(f"01 04 00 {start:02X} 00 02")
+
+
+@pytest.mark.parametrize(("key", "start"), [("current_l1", 0x0006), ("current_l2", 0x0008)])
+def test_the_sdm72d_m_manuals_example_requests(key: str, start: int) -> None:
+    """The SDM72D-M manual's Part 3 example (Amps 1: start 0006, Amps 2: 0008, 2 registers)."""
+    points = shipped("eastron_sdm72d_m").points()
+    assert read_of(points, key) == Read(Table.INPUT, start, 2)
+    assert build_frame(read_of(points, key), 1) == with_crc(f"01 04 00 {start:02X} 00 02")
 
 
 @pytest.mark.parametrize(

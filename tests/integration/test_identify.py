@@ -56,6 +56,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim = Simulator(specs, tick=0.0)
     # the Nastec's Modbus address register reads the address it answers at, as on the device
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
+    # the ABB B23's type designation reads its model, as on the meter
+    sim.set_value(placed["abb_b23"], "type_designation", "B23")
     return sim
 
 

@@ -36,6 +36,25 @@ def test_a_read_two_mappings_share_is_planned_once() -> None:
     assert len(probe_plan({"a": LIBRARY["p2_vfd"], "b": twin})) == len(probe_plan({"a": twin}))
 
 
+def text_matching(pattern: str) -> str:
+    """A text the shell pattern matches: ``*`` empty, ``?`` one letter, a ``[set]`` its first."""
+    text, i = "", 0
+    while i < len(pattern):
+        if pattern[i] == "[":
+            end = pattern.index("]", i)
+            text, i = text + pattern[i + 1], end + 1
+            continue
+        text += {"*": "", "?": "X"}.get(pattern[i], pattern[i])
+        i += 1
+    return text
+
+
+def text_words(text: str, count: int) -> tuple[int, ...]:
+    """``text`` as ``count`` registers, two characters each, high byte first, NUL padded."""
+    raw = text.encode("ascii").ljust(count * 2, b"\0")[: count * 2]
+    return tuple(int.from_bytes(raw[i : i + 2], "big") for i in range(0, count * 2, 2))
+
+
 def answers_for(name: str, unit: int) -> dict[Read, tuple[int, ...] | None]:
     """What a unit that passes every probe of ``name`` reads (a value each test accepts)."""
     mapping = LIBRARY[name]
@@ -43,6 +62,9 @@ def answers_for(name: str, unit: int) -> dict[Read, tuple[int, ...] | None]:
     answers: dict[Read, tuple[int, ...] | None] = {}
     for probe in mapping.fingerprint.probes:
         read = probe_read(probe, mapping.entities, mapping.protocol)
+        if probe.ascii is not None:
+            answers[read] = text_words(text_matching(probe.ascii), read.count)
+            continue
         first = (
             probe.equals
             if probe.equals is not None
