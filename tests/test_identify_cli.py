@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from bridge.cli import main
+from bridge.core.mapping import shipped_library
+from bridge.modbus.identify import request_bound
 from tests.integration.harness import simulator
 from tests.test_commission_cli import Served, run
 
@@ -31,7 +33,7 @@ def test_identify_json_tells_each_unit_and_writes_nothing(
     assert code == 0, err
     document = json.loads(out)
     assert document["probed"] == [1, 2, 3, 4, 5]
-    assert document["max_requests_per_unit"] == 47  # a SunSpec walk of up to 40 models
+    assert document["max_requests_per_unit"] == request_bound(shipped_library())
     found = {item["unit"]: item for item in document["found"]}
     assert sorted(found) == [2, 5]
     assert found[2]["matches"][0]["mapping"] == "soft_starter"
@@ -74,7 +76,9 @@ def test_unit_or_units_is_required(capsys: pytest.CaptureFixture[str]) -> None:
 def test_help_states_the_bound(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["identify", "--help"])
-    assert "(47 with the shipped ones)" in " ".join(capsys.readouterr().out.split())
+    assert f"({request_bound(shipped_library())} with the shipped ones)" in " ".join(
+        capsys.readouterr().out.split()
+    )
 
 
 def test_the_readme_shows_what_identify_prints(capsys: pytest.CaptureFixture[str]) -> None:

@@ -10,7 +10,7 @@ required probe rules out gets no more reads; a read two mappings share is sent o
 unit's answer, with the config snippet to paste.
 
 Bound: at most ``1 + max(walk, bases + MAX_PROBES x mappings)`` requests per unit
-(``request_bound``; 47 with the five shipped mappings); a unit that does not answer scan's
+(``request_bound``: 47 while a walk costs more than the probes); a unit that does not answer scan's
 probe costs that one timeout; a unit that answered and then leaves ``MAX_SILENT`` reads
 unanswered is left.
 """

@@ -10,7 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.mapping import shipped_library
 from bridge.dispatcher import RETAINED
+from bridge.modbus.identify import request_bound
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker
 from tests.integration.test_management import client_of, online, request, site
@@ -24,7 +26,11 @@ async def test_identify_over_mqtt_tells_the_units(mosquitto: Broker, tmp_path: P
         answer = await request(tester, "device/identify", {"units": "1-4", "timeout": 0.3})
         assert answer["status"] == "ok", answer
         data = answer["data"]
-        assert (data["bus"], data["probed"], data["max_requests_per_unit"]) == ("tcp", 4, 47)
+        assert (data["bus"], data["probed"], data["max_requests_per_unit"]) == (
+            "tcp",
+            4,
+            request_bound(shipped_library()),
+        )
         found = {item["unit"]: item for item in data["found"]}
         assert sorted(found) == [1, 3]
         assert found[1]["matches"][0]["mapping"] == "nastec_vasco"
