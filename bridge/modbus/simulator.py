@@ -450,6 +450,14 @@ class Simulator:
             changed |= reaction(unit, write)
         return changed
 
+    def set_registers(self, unit: int, values: dict[int, int]) -> None:
+        """Store holding registers ``{address: word}`` of the SunSpec unit ``unit``."""
+        try:
+            image = self._images[unit]
+        except KeyError:
+            raise KeyError(f"no SunSpec unit {unit}") from None
+        image.set_registers(values)
+
     def _device(self, unit: int) -> _Device:
         try:
             return self._devices[unit]

@@ -3,7 +3,8 @@
 ``SunSpecUnit(unit, image)`` joins a ``Simulator`` beside mapping units. It answers FC03
 within the image (the ``SunS`` marker, its models, the end marker); any read that leaves
 the image is refused with 02 (illegal data address) as a real device refuses it, and every
-other function code with 01. The registers never change: no writes, no motion.
+other function code with 01. It takes no writes and nothing moves on its own; a test
+changes registers with ``Simulator.set_registers`` (an energy counter, an event bit).
 """
 
 from __future__ import annotations
@@ -36,6 +37,21 @@ class ImageDevice:
     spec: SunSpecUnit
     requests: deque[Request] = field(default_factory=deque)
     quirks: Quirks = field(default_factory=Quirks)  # none: a SunSpec unit has no quirks
+    words: list[int] = field(default_factory=list)  # the image's registers, as they are now
+
+    def __post_init__(self) -> None:
+        self.words = list(self.spec.image.words)
+
+    def set_registers(self, values: dict[int, int]) -> None:
+        """Store ``{address: word}`` within the image (ValueError outside it or not a word)."""
+        image = self.spec.image
+        for address, word in values.items():
+            if not image.base <= address < image.base + len(self.words):
+                raise ValueError(f"register {address} is outside unit {self.unit}'s image")
+            if not 0 <= word <= 0xFFFF:
+                raise ValueError(f"register {address}: {word} is not a 16-bit word")
+        for address, word in values.items():
+            self.words[address - image.base] = word
 
     @property
     def unit(self) -> int:
@@ -59,10 +75,9 @@ class ImageDevice:
         self.requests.append((self.unit, function_code, address))
         if function_code != _READ_HOLDING or values is not None:
             return ExcCodes.ILLEGAL_FUNCTION
-        image = self.spec.image
-        first = address - image.base
-        if first < 0 or first + count > len(image.words):
+        first = address - self.spec.image.base
+        if first < 0 or first + count > len(self.words):
             return ExcCodes.ILLEGAL_ADDRESS
         for offset in range(count):
-            registers[address - start + offset] = image.words[first + offset]
+            registers[address - start + offset] = self.words[first + offset]
         return None

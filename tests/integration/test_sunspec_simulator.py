@@ -194,6 +194,22 @@ async def test_reads_outside_the_image_are_refused_like_a_device_refuses_them() 
         assert wrong_table.value.code == 1
 
 
+@pytest.mark.asyncio
+async def test_a_register_set_by_the_test_is_what_the_next_read_answers() -> None:
+    images = built()
+    sim = bus_simulator(images)
+    meter = images[4]
+    at = meter.base + 10
+    async with serving_tcp(sim) as port, open_bus(tcp_bus(port)) as submit:
+        sim.set_registers(4, {at: 0x1234, at + 1: 0})
+        assert await submit(4, Read(Table.HOLDING, at, 2), 1.0) == (0x1234, 0)
+    for bad, message in (({meter.base - 1: 1}, "outside"), ({at: 0x10000}, "16-bit")):
+        with pytest.raises(ValueError, match=message):
+            sim.set_registers(4, bad)
+    with pytest.raises(KeyError, match="no SunSpec unit 9"):
+        sim.set_registers(9, {at: 1})
+
+
 def test_unit_ids_stay_unique_across_mapping_and_sunspec_units() -> None:
     image = built()[4]
     with pytest.raises(ValueError, match="unique"):
