@@ -74,6 +74,7 @@ from bridge.modbus.commission import (
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import BusScheduler, Priority
+from bridge.sunspec_devices import SunSpecDevices
 
 Reloaded = Callable[[list[str]], Awaitable[None]]
 MAX_RAW = 2  # raw reads and writes waiting per bus; more are answered "busy"
@@ -99,6 +100,9 @@ class Management:
         self._mqtt_state = mqtt_state
         self.instance = instance  # this run, named in info and health checks
         self._reloading = asyncio.Lock()
+        # the mapping: sunspec devices' walks, run beside the engine's polls
+        self.sunspec = SunSpecDevices(loaded, engine, swap=self.swap_mapping)
+        engine.companions.append(self.sunspec.run)
         self._scanning: set[str] = set()  # buses with a scan running
         self._raw: Counter[str] = Counter()  # raw requests waiting or running, per bus
 
@@ -254,6 +258,8 @@ class Management:
         unknown = [d for d in wanted if d not in devices]
         if unknown:
             raise RequestError(f"devices: no such devices {unknown}")
+        if request.rewalk:
+            return await self._rewalk(wanted if request.devices is not None else None)
         settings = {d: devices[d].device for d in wanted}
         if request.mapping is not None:  # one device switches to another mapping
             (device_id,) = wanted
@@ -272,11 +278,38 @@ class Management:
                 if fresh[d] != self.loaded.mappings.get(d) or settings[d] != devices[d].device
             ]
             for device_id in changed:
-                await self.engine.replace_mapping(device_id, fresh[device_id], settings[device_id])
-                self.loaded.mappings[device_id] = fresh[device_id]
+                await self._replace(device_id, fresh[device_id], settings[device_id])
             if changed:
                 await self._on_reload(changed)
         return {"reloaded": wanted, "changed": changed}
+
+    async def _rewalk(self, wanted: list[str] | None) -> dict[str, Any]:
+        """Walk and build the SunSpec devices named (None: all) again, one at a time."""
+        sunspec = self.sunspec.ids
+        if wanted is None:
+            wanted = list(sunspec)
+        other = [d for d in wanted if d not in sunspec]
+        if other:
+            raise RequestError(f"devices: not mapping: sunspec devices {other}")
+        changed, failed = [], {}
+        for device_id in wanted:
+            try:
+                if await self.sunspec.rewalk(device_id):
+                    changed.append(device_id)
+            except (BridgeError, ValueError) as exc:
+                failed[device_id] = str(exc)
+        return {"reloaded": wanted, "changed": changed, "failed": failed}
+
+    async def swap_mapping(self, device_id: str, mapping: Mapping) -> None:
+        """Poll a device with another mapping from now on, as a reload does (its poller
+        afresh, discovery and state again): a SunSpec device's built mapping."""
+        async with self._reloading:
+            await self._replace(device_id, mapping, self.engine.device(device_id).device)
+            await self._on_reload([device_id])
+
+    async def _replace(self, device_id: str, mapping: Mapping, device: DeviceConfig) -> None:
+        await self.engine.replace_mapping(device_id, mapping, device)
+        self.loaded.mappings[device_id] = mapping
 
     def _switch_to(self, mapping: str) -> str:
         """The mapping a switch may load: a shipped name, or the resolved path of a .yaml
@@ -303,6 +336,9 @@ class Management:
         loaded: dict[str, Mapping] = {}
         errors: list[str] = []
         for device_id, device in settings.items():
+            if device.is_sunspec:  # built from its chain: kept (a rewalk builds it again)
+                loaded[device_id] = self.loaded.mappings[device_id]
+                continue
             bus = self.engine.schedulers[device.bus].transport.bus
             mapping, problems = load_device_mapping(device, bus, self.loaded.path.parent)
             errors += problems

@@ -12,7 +12,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Coroutine, Iterable
+from typing import Any
 
 from bridge.config import DeviceConfig, LoadedConfig, SerialBus, TcpBus
 from bridge.core.codec import Value
@@ -74,6 +75,8 @@ class Engine:
         self._policy = policy
         self._group: asyncio.TaskGroup | None = None
         self._tasks: dict[str, asyncio.Task[None]] = {}
+        # work that runs while the engine runs (and stops with it): the SunSpec walks
+        self.companions: list[Callable[[], Coroutine[Any, Any, None]]] = []
         for device in config.devices:
             if device.enabled:
                 self.devices[device.id] = self._poller(device, loaded.mappings[device.id])
@@ -101,7 +104,12 @@ class Engine:
             for bus_id, scheduler in self.schedulers.items():
                 group.create_task(scheduler.run(), name=f"bus:{bus_id}")
             for device_id, poller in self.devices.items():
-                self._tasks[device_id] = group.create_task(poller.run(), name=f"device:{device_id}")
+                if poller.points:  # a SunSpec device not walked yet polls nothing
+                    self._tasks[device_id] = group.create_task(
+                        poller.run(), name=f"device:{device_id}"
+                    )
+            for companion in self.companions:
+                group.create_task(companion(), name=getattr(companion, "__name__", "companion"))
 
     async def replace_mapping(
         self, device_id: str, mapping: Mapping, device: DeviceConfig | None = None
@@ -120,7 +128,7 @@ class Engine:
         poller.writer.inherit(old.writer)
         poller.state.carry_counters(old.state)
         self.devices[device_id] = poller
-        if self._group is not None:
+        if self._group is not None and poller.points:
             self._tasks[device_id] = self._group.create_task(
                 poller.run(), name=f"device:{device_id}"
             )
