@@ -21,6 +21,7 @@ from typing import Any
 
 import pytest
 
+from bridge.app import Bridge
 from bridge.config import LoadedConfig, load_config_data
 from bridge.core.health import Fault
 from bridge.core.mapping import builtin_mapping_path, load_mapping
@@ -39,6 +40,8 @@ from tests.integration.harness import (
     serving_tcp,
     tcp_bus,
 )
+from tests.integration.mosquitto import Broker
+from tests.integration.test_management import client_of, request
 from tests.sunspec_devices import every_image
 from tests.sunspec_reference import differences, expected_values, reference_models
 
@@ -217,3 +220,73 @@ async def test_a_dead_and_a_non_sunspec_unit_are_offline_and_delay_no_other(
     assert gaps and max(gaps) < 0.2 + 0.3 + 0.3, max(gaps)
     assert not tmp_path.joinpath("state/sunspec/dead.json").exists()
     assert not sim.writes
+
+
+@pytest.mark.asyncio
+async def test_over_mqtt_discovered_offline_and_rewalked_on_request(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """The built entities are discovered, a dead SunSpec unit is published offline, a
+    rewalk request rebuilds a changed chain (discovery again) and a retained one is
+    refused without a walk."""
+    sim = Simulator([seed_unit(1), SunSpecUnit(2, image("inverter_123", 40000))], tick=0)
+    async with serving_tcp(sim) as port:
+        data = {
+            "mqtt": {"url": mosquitto.url},
+            "buses": [tcp_bus(port, timeout=0.5)],
+            "devices": [
+                SEED,
+                {"id": "inverter", "bus": "tcp", "unit": 2, "mapping": "sunspec", "poll": POLL},
+                {"id": "dead", "bus": "tcp", "unit": 9, "mapping": "sunspec"},
+            ],
+        }
+        bridge = Bridge(load_config_data(data, tmp_path / "config.yaml"))
+        task = asyncio.create_task(bridge.run())
+        try:
+            async with client_of(mosquitto) as tester:
+                await tester.client.subscribe("modbus/+/availability")
+                await _rewalks(bridge, sim, tester, tmp_path)
+        finally:
+            await cancel(task)
+    assert not sim.writes
+
+
+async def _rewalks(bridge: Bridge, sim: Simulator, tester: Any, folder: Path) -> None:
+    topic = "homeassistant/device/inverter/config"
+    await eventually(lambda: topic in tester.retained, 20)
+    built = bridge.engine.devices["inverter"].mapping.entities
+    assert set(built) <= set(tester.json(topic)["cmps"])
+    await eventually(lambda: tester.retained.get("modbus/dead/availability") == b"offline", 20)
+    assert "homeassistant/device/dead/config" not in tester.retained
+    assert tester.retained.get("modbus/starter/availability") == b"online"
+
+    signature = _signature(folder)
+    sim.swap_image(2, image("inverter_mppt", 40000))  # a firmware update
+    walks, start = bridge.management.sunspec.walks, len(tester.log)
+    request_topic = "modbus/bridge/request/mapping/reload"
+    await tester.client.publish(request_topic, b'{"rewalk": true}', retain=True)
+    await eventually(lambda: tester.after(start, "modbus/bridge/response/mapping/reload"), 10)
+    await tester.client.publish(request_topic, b"", retain=True)  # cleared
+    (refused,) = tester.after(start, "modbus/bridge/response/mapping/reload")
+    assert json.loads(refused.payload)["status"] == "error"
+    assert "retained" in json.loads(refused.payload)["error"]
+    assert bridge.management.sunspec.walks == walks
+    assert bridge.engine.devices["inverter"].mapping.entities == built
+
+    not_sunspec = await request(tester, "mapping/reload", {"rewalk": True, "devices": ["starter"]})
+    assert "not mapping: sunspec devices ['starter']" in not_sunspec["error"]
+    before = len(tester.log)
+    answer = await request(tester, "mapping/reload", {"rewalk": True, "devices": ["inverter"]})
+    assert answer["data"] == {"reloaded": ["inverter"], "changed": ["inverter"], "failed": {}}
+    rebuilt = bridge.engine.devices["inverter"].mapping.entities
+    assert rebuilt != built
+    await eventually(lambda: tester.after(before, topic), 10)
+    await eventually(lambda: set(rebuilt) <= set(tester.json(topic)["cmps"]), 10)
+    assert _signature(folder) != signature
+    assert load_mapping(folder / "state/sunspec/inverter.yaml").entities == rebuilt
+    failed = await request(tester, "mapping/reload", {"rewalk": True, "devices": ["dead"]})
+    assert set(failed["data"]["failed"]) == {"dead"}
+
+
+def _signature(folder: Path) -> Any:
+    return json.loads((folder / "state/sunspec/inverter.json").read_text())["signature"]
