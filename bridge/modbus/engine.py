@@ -18,7 +18,7 @@ from typing import Any
 from bridge.config import DeviceConfig, LoadedConfig, SerialBus, TcpBus
 from bridge.core.codec import Value
 from bridge.core.guard import UNGUARDED, Guard
-from bridge.core.health import HealthPolicy
+from bridge.core.health import Fault, HealthPolicy
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, WriteSnapshot
 from bridge.core.mapping import Mapping
 from bridge.core.timing import LinkTiming, Mode
@@ -157,6 +157,9 @@ class Engine:
         )
 
 
+_WITH_REASON = (Fault.LOCKED, Fault.UNMAPPED)  # offline for a reason beyond failed requests
+
+
 def bus_snapshot(scheduler: BusScheduler) -> BusSnapshot:
     counters = scheduler.counters
     return BusSnapshot(
@@ -200,4 +203,5 @@ def device_snapshot(poller: DevicePoller) -> DeviceSnapshot:
         unknown_codes=poller.unknown_codes,
         counter_readings_held=poller.counter_readings_held,
         counter_resets=poller.counter_resets,
+        error=health.lock_reason if health.fault in _WITH_REASON and not health.online else None,
     )

@@ -214,6 +214,9 @@ async def test_a_dead_and_a_non_sunspec_unit_are_offline_and_delay_no_other(
             assert other.fault is Fault.UNMAPPED
             assert "not a SunSpec device" in other.lock_reason
             assert engine.devices["starter"].health.online
+            reported = {d.device_id: d.error for d in engine.snapshot().devices}
+            assert reported["other"] == other.lock_reason
+            assert reported["starter"] is None
     times = [t for _, t in sim.reads(1) if t >= start]
     gaps = [b - a for a, b in itertools.pairwise(times)]
     # fast polls every 0.2 s; a walk of the dead unit costs at most one timeout (0.3 s)
