@@ -5,7 +5,8 @@ runs) does one of two things:
 
 - the config loaded a cached mapping (bridge/sunspec/cache.py): the device polls with it
   at once; after its first poll the chain is walked once (the device's bus scheduler,
-  at poll priority) and, if it changed (a firmware update), the mapping is rebuilt,
+  at poll priority; after a backoff again until a walk succeeds) and, if it changed (a
+  firmware update), its registers are read and the mapping is rebuilt,
   swapped in the way ``mapping/reload`` swaps one (``swap``: bridge/management.py) and
   cached again;
 - no cache: the device is offline (the reason in its health and the log) until a walk
@@ -37,8 +38,8 @@ from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import Priority
 from bridge.sunspec import cache
-from bridge.sunspec.mapping import BuiltMapping, build_from_device
-from bridge.sunspec.walk import BASES, Chain, WalkLimits, walk
+from bridge.sunspec.mapping import BuiltMapping, build_from_device, build_mapping
+from bridge.sunspec.walk import BASES, Chain, WalkLimits, read_chain, walk
 
 log = logging.getLogger(__name__)
 Swap = Callable[[str, Mapping], Awaitable[None]]
@@ -57,7 +58,7 @@ class SunSpecDevices:
         self._swap = swap
         self.ids = [d for d, p in engine.devices.items() if p.device.is_sunspec]
         self._locks = {device_id: asyncio.Lock() for device_id in self.ids}
-        self.walks = 0  # walks done (for health and the tests)
+        self.walks = 0  # chain walks done, a check's and a build's (the tests count them)
 
     async def run(self) -> None:
         """Keep every SunSpec device's mapping built and current (until cancelled)."""
@@ -97,21 +98,39 @@ class SunSpecDevices:
                 delay = min(BACKOFF_MAX, delay * 2)
 
     async def _check(self, device_id: str, known: cache.Signature) -> None:
-        """After the cached mapping's first poll, walk once; rebuild if the chain changed."""
+        """After the cached mapping's first poll, walk once (again after a backoff until a
+        walk succeeds; the polls go on with the cached mapping meanwhile); a changed chain
+        is read and built."""
         poller = self.engine.device(device_id)
         deadline = time.monotonic() + FIRST_POLL_WAIT
         while not poller.first_poll_done and time.monotonic() < deadline:
             await asyncio.sleep(0.05)
-        try:
-            chain = await walk(self._reader(poller), *self._bounds(poller))
-            self.walks += 1
-            if cache.signature(chain) == known:
-                log.info("%s: SunSpec model chain unchanged (cached mapping)", device_id)
+        delay = BACKOFF_INITIAL
+        while True:
+            poller = self.engine.device(device_id)
+            read = self._reader(poller)
+            bases, limits = self._bounds(poller)
+            try:
+                chain = await walk(read, bases, limits)
+                self.walks += 1
+                if cache.signature(chain) == known:
+                    log.info("%s: SunSpec model chain unchanged (cached mapping)", device_id)
+                    return
+                log.warning("%s: the SunSpec model chain changed; building its mapping", device_id)
+                registers = await read_chain(read, chain, limits.read_limit)
+                built = build_mapping(chain, registers, read_limit=limits.read_limit)
+                await self._install(device_id, chain, built)
                 return
-            log.warning("%s: the SunSpec model chain changed; building its mapping", device_id)
-            await self.rewalk(device_id)
-        except (BridgeError, ValueError) as exc:  # polls go on with the cached mapping
-            log.warning("%s: the SunSpec chain could not be checked: %s", device_id, exc)
+            except (BridgeError, ValueError) as exc:
+                log.warning(
+                    "%s: the SunSpec chain could not be checked (%s); polling with the cached "
+                    "mapping, checking again in %.0f s",
+                    device_id,
+                    exc,
+                    delay,
+                )
+                await asyncio.sleep(delay)
+                delay = min(BACKOFF_MAX, delay * 2)
 
     async def _install(self, device_id: str, chain: Chain, built: BuiltMapping) -> bool:
         """Cache the built mapping and swap it in if it differs from the one polled."""
@@ -133,6 +152,10 @@ class SunSpecDevices:
             ", ".join(map(str, chain.model_ids)),
             len(mapping.entities),
         )
+        for pattern in poller.device.poll.rule().unmatched(mapping.entities):
+            log.warning(
+                "%s: poll.entities.%s names no entity of the built mapping", device_id, pattern
+            )
         return True
 
     def _offline(self, device_id: str, reason: str) -> None:
