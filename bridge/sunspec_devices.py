@@ -56,9 +56,13 @@ class SunSpecDevices:
         self.engine = engine
         self.state_dir = state_dir_of(loaded)
         self._swap = swap
-        self.ids = [d for d, p in engine.devices.items() if p.device.is_sunspec]
         self._locks = {device_id: asyncio.Lock() for device_id in self.ids}
         self.walks = 0  # chain walks done, a check's and a build's (the tests count them)
+
+    @property
+    def ids(self) -> list[str]:
+        """The devices polled as ``mapping: sunspec`` now (a mapping switch takes one out)."""
+        return [d for d, p in self.engine.devices.items() if p.device.is_sunspec]
 
     async def run(self) -> None:
         """Keep every SunSpec device's mapping built and current (until cancelled)."""
@@ -81,7 +85,7 @@ class SunSpecDevices:
             await self._check(device_id, cached.signature)
             return
         delay = BACKOFF_INITIAL
-        while True:
+        while self.engine.device(device_id).device.is_sunspec:  # not switched to a file
             try:
                 await self.rewalk(device_id)
                 return
@@ -106,7 +110,7 @@ class SunSpecDevices:
         while not poller.first_poll_done and time.monotonic() < deadline:
             await asyncio.sleep(0.05)
         delay = BACKOFF_INITIAL
-        while True:
+        while self.engine.device(device_id).device.is_sunspec:  # not switched to a file
             poller = self.engine.device(device_id)
             read = self._reader(poller)
             bases, limits = self._bounds(poller)
@@ -142,7 +146,9 @@ class SunSpecDevices:
             cache.store(self.state_dir, device_id, chain, built, bases=bases, read_limit=limit)
         except OSError as exc:
             log.error("%s: the SunSpec mapping could not be cached: %s", device_id, exc)
-        async with self._locks[device_id]:
+        async with self._locks.setdefault(device_id, asyncio.Lock()):
+            if not self.engine.device(device_id).device.is_sunspec:
+                return False  # switched to a mapping file meanwhile (mapping/reload)
             if mapping == self.loaded.mappings.get(device_id):
                 return False
             await self._swap(device_id, mapping)

@@ -293,3 +293,34 @@ async def _rewalks(bridge: Bridge, sim: Simulator, tester: Any, folder: Path) ->
 
 def _signature(folder: Path) -> Any:
     return json.loads((folder / "state/sunspec/inverter.json").read_text())["signature"]
+
+
+@pytest.mark.asyncio
+async def test_a_unit_that_is_not_sunspec_switched_to_its_mapping_file_stays_switched(
+    tmp_path: Path,
+) -> None:
+    sim = Simulator([seed_unit(4)], tick=0)
+    async with serving_tcp(sim) as port:
+        device = {"id": "other", "bus": "tcp", "unit": 4, "mapping": "sunspec", "poll": POLL}
+        data = {
+            "bridge": {"mapping_switch": True},
+            "buses": [tcp_bus(port, timeout=0.3)],
+            "devices": [device],
+        }
+        loaded = load_config_data(data, tmp_path / "config.yaml")
+        async with running(loaded) as (engine, management, _):
+            await eventually(lambda: engine.devices["other"].health.online is False, 10)
+            assert management.sunspec.ids == ["other"]
+            body = {"devices": ["other"], "mapping": "soft_starter"}
+            answer = json.loads(
+                await management.handle("mapping/reload", json.dumps(body).encode())
+            )
+            assert answer["data"] == {"reloaded": ["other"], "changed": ["other"]}
+            await eventually(lambda: engine.devices["other"].health.online, 10)
+            assert management.sunspec.ids == []
+            rewalk = await management.handle(
+                "mapping/reload", b'{"rewalk": true, "devices": ["other"]}'
+            )
+            assert "not mapping: sunspec devices ['other']" in json.loads(rewalk)["error"]
+            assert engine.devices["other"].mapping == loaded.mappings["other"]
+            assert loaded.mappings["other"].model != "device not walked yet"
