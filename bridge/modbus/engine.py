@@ -127,6 +127,8 @@ class Engine:
         poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         poller.writer.inherit(old.writer)
         poller.state.carry_counters(old.state)
+        if old.carried is not None:  # published before a restart, before it had a mapping
+            poller.seed_counters(old.carried)
         self.devices[device_id] = poller
         if self._group is not None and poller.points:
             self._tasks[device_id] = self._group.create_task(
