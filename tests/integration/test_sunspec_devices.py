@@ -255,11 +255,25 @@ async def test_over_mqtt_discovered_offline_and_rewalked_on_request(
         task = asyncio.create_task(bridge.run())
         try:
             async with client_of(mosquitto) as tester:
-                await tester.client.subscribe("modbus/+/availability")
+                await tester.client.subscribe("modbus/+/availability", "modbus/inverter")
+                await _published_as_pysunspec2(tester, image("inverter_123", 40000))
                 await _rewalks(bridge, sim, tester, tmp_path)
         finally:
             await cancel(task)
     assert not sim.writes
+
+
+async def _published_as_pysunspec2(tester: Any, served: DeviceImage) -> None:
+    """The device's JSON on the broker holds pysunspec2's value of each implemented point."""
+    want = {k: v for k, v in (await expected(served)).items() if v is not None}
+
+    def document() -> dict[str, Any]:
+        raw = tester.retained.get("modbus/inverter")
+        return json.loads(raw) if raw else {}
+
+    await eventually(lambda: all(document().get(k) is not None for k in want), 20)
+    shown = document()
+    assert differences({k: shown[k] for k in want}, want) == []
 
 
 async def _rewalks(bridge: Bridge, sim: Simulator, tester: Any, folder: Path) -> None:
