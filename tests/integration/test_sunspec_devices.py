@@ -21,6 +21,7 @@ from typing import Any
 
 import pytest
 
+from bridge import sunspec_devices
 from bridge.app import Bridge
 from bridge.config import LoadedConfig, load_config_data
 from bridge.core.counters import counters_of
@@ -200,8 +201,12 @@ async def test_a_changed_chain_is_rebuilt_and_cached_again(tmp_path: Path) -> No
 
 @pytest.mark.asyncio
 async def test_a_dead_and_a_non_sunspec_unit_are_offline_and_delay_no_other(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
+    """The dead unit is walked again every 0.2-0.4 s here (5 s to 5 min by default),
+    each walk one timeout at poll priority; the unit without a marker once (10 min)."""
+    monkeypatch.setattr(sunspec_devices, "BACKOFF_INITIAL", 0.2)
+    monkeypatch.setattr(sunspec_devices, "BACKOFF_MAX", 0.4)
     sim = Simulator([seed_unit(1), seed_unit(4)], tick=0, read_log=1000)
     async with serving_tcp(sim) as port:
         devices = [
@@ -228,7 +233,10 @@ async def test_a_dead_and_a_non_sunspec_unit_are_offline_and_delay_no_other(
     times = [t for _, t in sim.reads(1) if t >= start]
     gaps = [b - a for a, b in itertools.pairwise(times)]
     # fast polls every 0.2 s; a walk of the dead unit costs at most one timeout (0.3 s)
-    assert gaps and max(gaps) < 0.2 + 0.3 + 0.3, max(gaps)
+    assert gaps and max(gaps) < 0.2 + 0.3 + 0.5, max(gaps)
+    assert caplog.text.count("dead: SunSpec walk failed") >= 4
+    assert caplog.text.count("other: not a SunSpec device") == 1
+    assert [a for unit, _, a in sim.requests if unit == 4].count(40000) == 1
     assert not tmp_path.joinpath("state/sunspec/dead.json").exists()
     assert not sim.writes
 
