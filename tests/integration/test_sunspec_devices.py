@@ -380,3 +380,20 @@ async def test_counters_carried_over_before_the_first_build_hold_a_lower_reading
             await eventually(lambda: all_read(engine, "meter", want), 20)
             await eventually(lambda: engine.devices["meter"].counter_readings_held >= 2, 10)
             assert engine.devices["meter"].values[key] == high
+
+
+@pytest.mark.asyncio
+async def test_a_state_folder_that_cannot_be_written_leaves_the_device_polling(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    served = image("inverter_123", 40000)
+    want = await expected(served)
+    (tmp_path / "state").write_text("a file where the folder should be", encoding="utf-8")
+    sim = Simulator([SunSpecUnit(2, served)], tick=0)
+    async with serving_tcp(sim) as port:
+        inverter = {"id": "inverter", "bus": "tcp", "unit": 2, "mapping": "sunspec", "poll": POLL}
+        loaded = site_config(tmp_path, [tcp_bus(port, timeout=1.0)], [inverter])
+        async with running(loaded) as (engine, _, _):
+            await eventually(lambda: all_read(engine, "inverter", want), 20)
+            assert differences(engine.devices["inverter"].values, want) == []
+    assert "inverter: the SunSpec mapping could not be cached" in caplog.text
