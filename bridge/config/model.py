@@ -130,10 +130,22 @@ SUNSPEC = "sunspec"  # a device's mapping built from its SunSpec model chain
 MAX_SUNSPEC_BASE = 65532  # the marker and the first model's ID and L fit below 65536
 
 
+def _sunspec_base(value: object) -> object:
+    """``auto`` or a register the marker and a model header fit after; one message."""
+    if value == "auto" or (
+        isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_SUNSPEC_BASE
+    ):
+        return value
+    raise ValueError(f"auto, or the holding register of the SunS marker (0..{MAX_SUNSPEC_BASE})")
+
+
 class SunSpecConfig(Strict):
     """Where a ``mapping: sunspec`` device's ``SunS`` marker is."""
 
-    base: Literal["auto"] | Annotated[int, Field(ge=0, le=MAX_SUNSPEC_BASE)] = Field(
+    base: Annotated[
+        Literal["auto"] | Annotated[int, Field(ge=0, le=MAX_SUNSPEC_BASE)],
+        BeforeValidator(_sunspec_base),
+    ] = Field(
         "auto",
         description="holding register of the SunS marker; auto tries 40000, 50000, then 0",
     )

@@ -75,10 +75,12 @@ def test_sunspec_settings_only_with_mapping_sunspec(tmp_path: Path) -> None:
     assert found.startswith("devices.inverter: sunspec: only with mapping: sunspec")
 
 
-@pytest.mark.parametrize("base", [-1, 65533, "40000x", "manual"])
+@pytest.mark.parametrize("base", [-1, 65533, "40000x", "manual", True, 1.5])
 def test_a_base_outside_the_register_space_is_refused(tmp_path: Path, base: Any) -> None:
-    found = issues(tmp_path, device(sunspec={"base": base}))
-    assert found and all(row.startswith("devices.inverter.sunspec.base") for row in found)
+    assert issues(tmp_path, device(sunspec={"base": base})) == (
+        "devices.inverter.sunspec.base: auto, or the holding register of the SunS marker "
+        "(0..65532)",
+    )
 
 
 def test_options_and_modbus_ascii_are_refused(tmp_path: Path) -> None:
