@@ -119,9 +119,11 @@ test-docker: $(DEV)
 demo: $(if $(wildcard $(DEV)),$(DEV),$(RUN))
 	$(BIN)/modbus-mqtt-bridge demo $(ARGS)
 
-# docs/config.md is generated from the config schema (tests/test_docs.py checks it).
+# docs/config.md is generated from the config schema (tests/test_docs.py checks it), docs/library.md
+# from the mappings' library blocks (tests/library/test_library_doc.py).
 docs: $(DEV)
 	$(BIN)/modbus-mqtt-bridge schema --markdown > docs/config.md
+	$(BIN)/python tools/library_doc.py > docs/library.md
 
 clean:
 	rm -rf $(VENV) $(OTHER_VENV) .ha build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -103,9 +103,11 @@ def wire_addresses() -> set[int]:
 
 
 def trimmed_mapping() -> dict[str, Any]:
-    """The shipped mapping with only the entities of ``KEYS`` (YAML document)."""
+    """The shipped mapping with only the entities of ``KEYS`` (YAML document; its
+    fingerprint, whose probes name other entities, left out)."""
     document = yaml.safe_load(builtin_mapping_path(MAPPING).read_text(encoding="utf-8"))
     document["entities"] = {k: v for k, v in document["entities"].items() if k in KEYS}
+    document.pop("fingerprint", None)
     return dict(document)
 
 

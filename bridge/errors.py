@@ -136,7 +136,10 @@ class NotSunSpecError(SunSpecError):
 
 
 class SunSpecChainError(SunSpecError):
-    """The model chain is malformed or larger than the walk's bounds."""
+    """The model chain is malformed or larger than the walk's bounds; ``base``: where the
+    marker was found (set by the walk)."""
+
+    base: int | None = None
 
 
 class ModbusError(BridgeError):

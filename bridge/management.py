@@ -44,6 +44,7 @@ from bridge.core.instance import Instance
 from bridge.core.management_request import (
     MAX_UNIT,
     REQUESTS,
+    DeviceIdentify,
     DeviceRead,
     DeviceScan,
     DeviceWrite,
@@ -60,6 +61,7 @@ from bridge.core.mapping import (
     Mapping,
     builtin_mapping_names,
     mapping_schema,
+    shipped_library,
 )
 from bridge.core.reach import Neighbour, Reach, check_raw_read, check_raw_write, reach_of
 from bridge.errors import BridgeError, ModbusError
@@ -72,6 +74,7 @@ from bridge.modbus.commission import (
     scheduler_submit,
 )
 from bridge.modbus.engine import Engine
+from bridge.modbus.identify import identify, request_bound
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import BusScheduler, Priority
 from bridge.sunspec_devices import SunSpecDevices
@@ -130,6 +133,8 @@ class Management:
             return await self._write(request)
         if isinstance(request, DeviceScan):
             return await self._scan(request)
+        if isinstance(request, DeviceIdentify):
+            return await self._identify(request)
         if isinstance(request, MappingReload):
             return await self._reload(request)
         if isinstance(request, HealthCheck):
@@ -170,6 +175,17 @@ class Management:
             yield
         finally:
             self._raw[bus_id] -= 1
+
+    @asynccontextmanager
+    async def _scan_slot(self, scheduler: BusScheduler) -> AsyncIterator[None]:
+        """The bus's one place for a scan or an identify, or "busy"."""
+        if scheduler.bus_id in self._scanning:
+            raise RequestError(f"busy: a scan of bus {scheduler.bus_id} is running")
+        self._scanning.add(scheduler.bus_id)
+        try:
+            yield
+        finally:
+            self._scanning.discard(scheduler.bus_id)
 
     def _bus(self, bus_id: str | None) -> BusScheduler:
         schedulers = self.engine.schedulers
@@ -227,13 +243,8 @@ class Management:
             for device_id, p in self.engine.devices.items()
             if p.scheduler is scheduler
         }
-        if scheduler.bus_id in self._scanning:
-            raise RequestError(f"busy: a scan of bus {scheduler.bus_id} is running")
-        self._scanning.add(scheduler.bus_id)
-        try:
+        async with self._scan_slot(scheduler):
             found = await scan(scheduler_submit(scheduler, Priority.POLL), units, timeout)
-        finally:
-            self._scanning.discard(scheduler.bus_id)
         return {
             "bus": scheduler.bus_id,
             "probed": len(units),
@@ -248,6 +259,27 @@ class Management:
                 }
                 for f in found
             ],
+        }
+
+    async def _identify(self, request: DeviceIdentify) -> dict[str, Any]:
+        """``identify`` (bridge/modbus/identify.py) through the bus's scheduler, with the
+        polls, one scan or identify per bus at a time: ``timeout`` for each unit's first
+        answer, the bus's for the reads after. Only scores are answered, not values read."""
+        scheduler = self._bus(request.bus)
+        units = request.unit_ids()
+        timeout = request.timeout or self.settings.scan_timeout
+        library = await asyncio.to_thread(shipped_library)
+        wait = scheduler.transport.bus.timeout
+        async with self._scan_slot(scheduler):
+            submit = scheduler_submit(scheduler, Priority.POLL)
+            found = await identify(
+                submit, units, library, timeout, scheduler.bus_id, read_timeout=wait
+            )
+        return {
+            "bus": scheduler.bus_id,
+            "probed": len(units),
+            "max_requests_per_unit": request_bound(library),
+            "found": [identity.as_dict() for identity in found],
         }
 
     # --- mappings -------------------------------------------------------------------------

@@ -86,6 +86,50 @@ def test_mappings_list_names_all_shipped(capsys: pytest.CaptureFixture[str]) -> 
     assert len(out.splitlines()) == 1 + len(builtin_mapping_names())
 
 
+def test_mappings_list_by_category(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["mappings", "list", "--category", "drive"]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[0].split() == ["NAME", "CATEGORY", "MANUFACTURER", "MODEL", "ENTITIES"]
+    assert [row.split()[0] for row in rows[1:]] == ["p2_vfd", "vacon_nx"]
+    assert all(row.split()[1] == "drive" for row in rows[1:])
+    assert run("mappings", "list", "--category", "fridge").returncode == 2
+
+
+def test_mappings_show_prints_the_index_entry_and_fingerprint(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["mappings", "show", "smartgen_hgm6100"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "category: genset" in out
+    assert "transports: rtu" in out
+    assert "aliases: HGM6110, HGM6120, HGM6110N, HGM6120N" in out
+    assert any(line.startswith("document: SmartGen HGM6100 series") for line in out)
+    assert out.index(next(line for line in out if line.startswith("fingerprint: "))) > next(
+        i for i, line in enumerate(out) if line.startswith("KEY ")
+    )
+    assert any(line.startswith("  probe ") for line in out)
+
+
+def test_mappings_show_prints_a_library_meters_disagreements(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["mappings", "show", "eastron_sdm630"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "category: meter" in out
+    assert any(line.startswith("document: Eastron SDM630Modbus") and "V1.8" in line for line in out)
+    assert any(line.startswith("disagreement frequency (openems): ") for line in out)
+    row = next(line for line in out if line.startswith("current_l1 "))
+    assert row.split()[:5] == ["current_l1", "0x0006", "6", "(0x0006)", "input"]
+
+
+@pytest.mark.parametrize("ref", ["SDM630", "sdm-630", "SDM630-Modbus V2"])
+def test_mappings_show_finds_a_model_by_an_alias(
+    ref: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["mappings", "show", ref]) == 0
+    assert capsys.readouterr().out.startswith("Eastron SDM630-Modbus V2: ")
+
+
 def test_mappings_show_prints_printed_and_wire_address(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["mappings", "show", "nastec_vasco"]) == 0
     line = next(
@@ -194,6 +238,7 @@ entities:
   baud: {name: Baud rate, address: 5, ha: {entity_category: diagnostic, enabled: true}}
 """
 LIBRARY_ROWS = [
+    "library: a shipped mapping has its index entry (docs/mappings.md, Library)",
     "manufacturer: 'Unknown (OEM)' does not read as a company's name (write 'Generic' when "
     "the manual names none, and what you know in a comment)",
     "entities.bms_voltage.name: 'BMS' is written in capitals: write it as a word, or add the "
@@ -265,8 +310,8 @@ def test_the_library_rules_are_warned_of_for_a_file_of_the_library(
     monkeypatch.setattr(mapping_module, "mappings_folder", library.resolve)
     assert main(["mappings", "validate", str(library / "new_device.yaml")]) == 0
     out, err = capsys.readouterr()
-    assert out == f"{library / 'new_device.yaml'}: ok (5 entities, 6 warning(s))\n"
+    assert out == f"{library / 'new_device.yaml'}: ok (5 entities, 7 warning(s))\n"
     assert err.splitlines() == [
-        f"warning: {library / 'new_device.yaml'}: 6 warning(s)",
+        f"warning: {library / 'new_device.yaml'}: 7 warning(s)",
         *(f"  {row}" for row in LIBRARY_ROWS),
     ]

@@ -38,7 +38,7 @@ from bridge.config import (
     load_config_data,
 )
 from bridge.core.health_report import BusSnapshot, Snapshot
-from bridge.core.mapping import builtin_mapping_names
+from bridge.core.mapping import library_index, mappings_folder
 from bridge.metrics import BUS_HEALTH_PATH, HEALTH_PATH, serve_metrics
 from tests.ports import free_port
 
@@ -170,7 +170,8 @@ def test_demo_simulator_command_parses_with_the_real_cli() -> None:
     args = _simulate_args()
     assert args.command == "simulate"
     assert args.tcp == "0.0.0.0:5020"
-    assert sorted(args.mapping) == sorted(builtin_mapping_names())  # all five seeds
+    seeds = [n for n, path in library_index().items() if path.parent == mappings_folder()]
+    assert sorted(args.mapping) == sorted(seeds)  # all five seeds (not the device library)
     assert args.unit == [1, 2, 3, 4, 5]
     build_simulator(args)  # mappings load, units are unique, options are valid
 

@@ -36,6 +36,8 @@ from bridge.core.codec import decode, encode
 from bridge.core.discovery import DeviceInfo, Origin, build_device_discovery
 from bridge.core.discovery_entity import platform_of
 from bridge.core.entity import Entity, PollClass, Presentation, RawRange, Variant
+from bridge.core.fingerprint import Fingerprint, Probe
+from bridge.core.library import Disagreement, Library
 from bridge.core.mapping import Mapping, Source, load_mapping, parse_mapping
 from bridge.core.planner import limits_for, plan_reads
 from bridge.core.protocol import (
@@ -171,7 +173,7 @@ def test_every_mapping_field_is_documented() -> None:
     text = MAPPINGS_DOC.read_text(encoding="utf-8")
     models: list[type[BaseModel]] = [Mapping, Source, OptionSpec, Entity, Variant, RawRange]
     models += [Presentation, Protocol, Addressing, ExceptionMeaning, Keepalive, Segment]
-    models += [Reserved, SerialDefaults]
+    models += [Reserved, SerialDefaults, Fingerprint, Probe, Library, Disagreement]
     prose = re.sub(r"```.*?```", "", text, flags=re.DOTALL)
     spans = " ".join(re.findall(r"`([^`]+)`", prose))
     for model in models:

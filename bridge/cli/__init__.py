@@ -3,6 +3,7 @@
     console.py       main(): the parser, check | schema | mappings, and run (the bridge)
     simulate.py      simulate: simulated devices built from mappings
     commission.py    scan | read | write: commissioning a bus without the bridge
+    identify.py      identify: what answers at a unit (SunSpec marker, mapping fingerprints)
     bus_spec.py      a bus named on the command line (tcp://..., rtu:///dev/...)
     demo.py          demo: the seed devices simulated and bridged, shown live
     demo_view.py     what the demo shows (a rich table or plain lines)

@@ -18,17 +18,20 @@ from typing import TextIO
 
 from bridge import __version__
 from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
+from bridge.cli.mapping_view import named, print_fingerprint, print_header
 from bridge.config import config_schema, load_config
 from bridge.core.address import format_address
 from bridge.core.entity import Entity
+from bridge.core.library import Category
 from bridge.core.mapping import (
     Mapping,
-    builtin_mapping_names,
     check_mapping_file,
     in_library,
+    library_index,
     load_mapping,
     mapping_schema,
     resolve_mapping_path,
+    shipped_library,
 )
 from bridge.errors import BridgeError, InputError, MappingError, first_of
 
@@ -71,6 +74,7 @@ _LAZY = {  # command: (module, the function that adds its parser)
     "scan": ("bridge.cli.commission", "add_parsers"),
     "read": ("bridge.cli.commission", "add_parsers"),
     "write": ("bridge.cli.commission", "add_parsers"),
+    "identify": ("bridge.cli.identify", "add_parser"),
     "demo": ("bridge.cli.demo", "add_parser"),
     "import": ("bridge.cli.importer", "add_parser"),
 }
@@ -103,9 +107,17 @@ def _parser(command: str | None = None) -> argparse.ArgumentParser:
 
     mappings = commands.add_parser("mappings", help="list, show or validate mappings")
     actions = mappings.add_subparsers(dest="action", required=True, metavar="ACTION")
-    actions.add_parser("list", help="the shipped mappings").set_defaults(handler=_list)
-    show = actions.add_parser("show", help="entities of a mapping with wire addresses")
-    show.add_argument("name", help="shipped mapping name or path to a YAML file")
+    listed = actions.add_parser("list", help="the shipped mappings")
+    listed.add_argument(
+        "--category", choices=[c.value for c in Category], help="only this kind of device"
+    )
+    listed.set_defaults(handler=_list)
+    show = actions.add_parser(
+        "show", help="a mapping's index entry, entities with wire addresses, fingerprint"
+    )
+    show.add_argument(
+        "name", help="shipped mapping name, its model or an alias (SDM630), or a YAML file"
+    )
     show.add_argument(
         "-o",
         "--option",
@@ -177,19 +189,24 @@ def _schema(args: argparse.Namespace, out: TextIO) -> int:
     return EXIT_OK
 
 
-def _list(_: argparse.Namespace, out: TextIO) -> int:
+def _list(args: argparse.Namespace, out: TextIO) -> int:
     rows = []
-    for name in builtin_mapping_names():
-        mapping = load_mapping(resolve_mapping_path(name))
-        rows.append((name, mapping.manufacturer, mapping.model, str(len(mapping.entities))))
-    _table(("NAME", "MANUFACTURER", "MODEL", "ENTITIES"), rows, out)
+    for name, mapping in shipped_library().items():
+        category = mapping.library.category.value if mapping.library is not None else ""
+        if args.category in (None, category):
+            size = str(len(mapping.entities))
+            rows.append((name, category, mapping.manufacturer, mapping.model, size))
+    _table(("NAME", "CATEGORY", "MANUFACTURER", "MODEL", "ENTITIES"), rows, out)
     return EXIT_OK
 
 
 def _show(args: argparse.Namespace, out: TextIO) -> int:
-    mapping = load_mapping(resolve_mapping_path(args.name, Path.cwd()))
+    ref = args.name
+    if ref not in library_index() and not Path(ref).is_file():
+        ref = named(ref) or ref  # a model or an alias: SDM630
+    mapping = load_mapping(resolve_mapping_path(ref, Path.cwd()))
     options = _parse_options(args.option, mapping)
-    print(f"{mapping.manufacturer} {mapping.model}: {mapping.description}", file=out)
+    print_header(mapping, out)
     for name, spec in mapping.options.items():
         chosen = options.get(name, spec.default)
         print(
@@ -206,6 +223,7 @@ def _show(args: argparse.Namespace, out: TextIO) -> int:
         rows.append((key, address, wire, *kind, unit, e.component.value))
     headers = ("KEY", "PRINTED", "WIRE", "TABLE", "TYPE", "BITS", "ACCESS", "UNIT", "HA")
     _table(headers, rows, out)
+    print_fingerprint(mapping, out)
     return EXIT_OK
 
 

@@ -58,6 +58,7 @@ ABBREVIATIONS = frozenset(
         "SCR",
         "SSD",
         "TCP",
+        "THD",  # total harmonic distortion (energy meters)
         "UAB",  # phase-to-phase voltages as genset controllers print them
         "UBC",
         "UCA",

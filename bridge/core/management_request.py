@@ -104,6 +104,24 @@ class DeviceScan(Request):
         return parse_units(self.units)
 
 
+class DeviceIdentify(Request):
+    """What answers at ``unit`` (or each of ``units``) on a bus: read-only probes."""
+
+    bus: str | None = None
+    unit: int | None = Field(None, ge=1, le=MAX_UNIT)
+    units: str | list[int] | None = Field(None, max_length=MAX_UNIT)
+    timeout: Duration | None = Field(None, gt=0, le=MAX_SCAN_TIMEOUT)
+
+    @model_validator(mode="after")
+    def _unit_or_units(self) -> Self:
+        if (self.unit is None) == (self.units is None):
+            raise ValueError('give unit or units (like "1-247"), one of them')
+        return self
+
+    def unit_ids(self) -> list[int]:
+        return [self.unit] if self.unit is not None else parse_units(self.units or [])
+
+
 class MappingReload(Request):
     """Read the mapping files again (all devices, or those listed) and apply them; with
     ``mapping`` (a shipped name or a file under ``bridge.mapping_dirs``; needs
@@ -132,6 +150,7 @@ REQUESTS: dict[str, type[Request]] = {
     "device/read": DeviceRead,
     "device/write": DeviceWrite,
     "device/scan": DeviceScan,
+    "device/identify": DeviceIdentify,
     "mapping/reload": MappingReload,
     "health_check": HealthCheck,
 }

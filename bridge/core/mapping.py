@@ -11,6 +11,7 @@ entities a device has for its option values, and as which variant, is ``variant`
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable
 from collections.abc import Mapping as AnyMapping
 from dataclasses import dataclass, field
@@ -24,6 +25,8 @@ from bridge.core import checks
 from bridge.core.address import format_address, to_wire
 from bridge.core.convention import name_problems
 from bridge.core.entity import Entity, Table
+from bridge.core.fingerprint import Fingerprint, check_fingerprint
+from bridge.core.library import Library, disagreement_problems
 from bridge.core.protocol import OptionSpec, Protocol, write_function
 from bridge.core.variant import active_entities
 from bridge.core.yaml_source import parse_yaml
@@ -40,6 +43,8 @@ class Source(BaseModel):
     title: str
     seed: str | None = None
     document: str | None = None
+    version: str | None = Field(None, description="the document's version or date")
+    url: str | None = Field(None, description="where the document is published")
 
 
 class Mapping(BaseModel):
@@ -55,10 +60,18 @@ class Mapping(BaseModel):
     options: dict[str, OptionSpec] = Field(default_factory=dict)
     status: str | None = Field(None, description="key of the entity that is the device status")
     entities: dict[str, Entity] = Field(min_length=1)
+    fingerprint: Fingerprint | None = Field(
+        None, description="what a unit reads that tells it is this model (identify)"
+    )
+    library: Library | None = Field(None, description="the device library's index entry")
 
     @model_validator(mode="after")
     def _check_whole(self) -> Self:
         errors = checks.check_mapping(self)
+        if self.fingerprint is not None:
+            errors += check_fingerprint(self.fingerprint, self.entities, self.protocol)
+        if self.library is not None:
+            errors += disagreement_problems(self.library, self.entities)
         if errors:
             raise ValueError("\n".join(errors))
         return self
@@ -234,7 +247,7 @@ def check_mapping_text(text: str, source: str, *, library: bool = False) -> Mapp
         warned = library_problems(mapping) if library else []
         return MappingReport(source, mapping, (), tuple(warned))
     more, warnings = _rows_of_valid_parts(data)
-    warned = warnings if library else []
+    warned = ([_NO_ENTRY] if "library" not in data else []) + warnings if library else []
     return MappingReport(source, None, tuple(dict.fromkeys(rows + more)), tuple(warned))
 
 
@@ -248,9 +261,13 @@ def parse_mapping(text: str, source: str) -> Mapping:
 
 
 def library_problems(mapping: Mapping) -> list[str]:
-    """The shipped library's conventions ``mapping`` breaks (``checks.check_conventions``),
-    as rows: for the library's files only, never a user's or an imported mapping."""
-    return checks.check_conventions(mapping)
+    """The shipped library's conventions ``mapping`` breaks (``checks.check_conventions``;
+    an index entry, ``library:``), as rows: for the library's files only, never a user's
+    or an imported mapping."""
+    return ([_NO_ENTRY] if mapping.library is None else []) + checks.check_conventions(mapping)
+
+
+_NO_ENTRY = "library: a shipped mapping has its index entry (docs/mappings.md, Library)"
 
 
 def _rows_of_valid_parts(data: dict[str, Any]) -> tuple[list[str], list[str]]:
@@ -346,22 +363,47 @@ def mappings_folder() -> Path:
     return installed if installed.is_dir() else package.parent / "mappings"
 
 
+def library_index() -> dict[str, Path]:
+    """Every shipped mapping's name (its file's stem) and file, found at any depth of
+    ``mappings_folder`` (the seeds at the top, the library in ``library/<category>/``),
+    sorted by name; two files of one name are an error naming both."""
+    return _index_of(mappings_folder())
+
+
+@functools.cache
+def _index_of(folder: Path) -> dict[str, Path]:
+    found: dict[str, Path] = {}
+    for path in sorted(folder.rglob("*.yaml")):
+        if path.stem in found:
+            both = f"{found[path.stem]} and {path}"
+            raise MappingError(path.stem, [f"two shipped mappings have this name: {both}"])
+        found[path.stem] = path
+    return dict(sorted(found.items()))
+
+
 def in_library(path: Path) -> bool:
-    """True for a file of the shipped library (a ``.yaml`` directly in ``mappings_folder``),
-    the only files the library's conventions are checked on."""
+    """True for a file of the shipped library (a ``.yaml`` at any depth of
+    ``mappings_folder``), the only files the library's conventions are checked on."""
     try:
-        return path.resolve().parent == mappings_folder() and path.suffix == ".yaml"
+        return path.resolve() in library_index().values()
     except (OSError, RuntimeError):  # a symlink loop: not the library's
         return False
 
 
 def builtin_mapping_names() -> list[str]:
     """Names of the mappings shipped with the bridge (file stems)."""
-    return sorted(path.stem for path in mappings_folder().glob("*.yaml"))
+    return list(library_index())
+
+
+@functools.cache
+def shipped_library() -> dict[str, Mapping]:
+    """Every shipped mapping by name, loaded once (what ``identify`` compares with)."""
+    return {name: load_mapping(path) for name, path in library_index().items()}
 
 
 def builtin_mapping_path(name: str) -> Path:
-    return mappings_folder() / f"{name}.yaml"
+    found = library_index().get(name)
+    return found if found is not None else mappings_folder() / f"{name}.yaml"
 
 
 def resolve_mapping_path(ref: str, base: Path | None = None) -> Path:

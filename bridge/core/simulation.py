@@ -523,7 +523,8 @@ def advance(
     movers: tuple[Mover, ...], image: Image, rng: random.Random, seconds: float = 1.0
 ) -> dict[Cell, int]:
     """One tick of ``seconds``: the cells that change. Sentinels are skipped, ranges held;
-    a counter rises by its rate, whole raw steps, the fraction by chance (never falls)."""
+    a counter rises by its rate, whole raw steps, the fraction by chance (never falls); a
+    float counter by the exact amount (a meter's kWh float rises by 0.004 kWh in 10 s)."""
     changes: dict[Cell, int] = {}
     for mover in movers:
         value = decode(mover.point, image)
@@ -534,7 +535,7 @@ def advance(
             target: Value = decode(mover.follows, {**image, **changes})
         elif mover.counter:
             steps = _rate(mover, image) * seconds / 3600 / abs(scale)
-            whole = int(steps)
+            whole = steps if mover.point.entity.data_type.is_float else int(steps)
             target = value + (whole + (rng.random() < steps - whole)) * abs(scale)
         else:
             target = min(

@@ -38,6 +38,8 @@ _MEASURED: dict[str, Plausible] = {  # by unit
     "kW": Plausible(5, 25, 15),
     "kvar": Plausible(1, 8, 4),
     "kVA": Plausible(6, 28, 16),
+    "var": Plausible(100, 600, 300),  # a household meter's reactive and apparent power
+    "VA": Plausible(900, 2400, 1600),
     "°C": Plausible(30, 85, 40),
     "%": Plausible(20, 80, 50),
     "rpm": Plausible(1440, 1520, 1480),
@@ -58,6 +60,8 @@ _COUNTED: dict[str | None, Plausible] = {  # by unit: typical reading, rise per 
     "kWh": Plausible(0, 1e12, _RUN_HOURS * 12, 15),
     "Wh": Plausible(0, 1e12, _RUN_HOURS * 1200, 1500),
     "MWh": Plausible(0, 1e9, _RUN_HOURS * 0.012, 0.015),
+    "kvarh": Plausible(0, 1e12, _RUN_HOURS * 3, 3),
+    "kVAh": Plausible(0, 1e12, _RUN_HOURS * 16, 16),
     None: Plausible(0, 1e9, 100, 1),
 }
 _STARTS = Plausible(0, 1e9, 420, 0.5)  # a start every two hours

@@ -120,7 +120,12 @@ async def walk(read: Read, bases: Sequence[int] = BASES, limits: WalkLimits | No
             try:
                 models, common = await _follow(counted, base + 2, (head[2], head[3]), limits)
             except DeviceExceptionError as e:
-                raise SunSpecChainError(f"the chain from {base}: a read was refused ({e})") from e
+                refused = SunSpecChainError(f"the chain from {base}: a read was refused ({e})")
+                refused.base = base
+                raise refused from e
+            except SunSpecChainError as e:
+                e.base = base
+                raise
             return Chain(base, models, common, counted.requests)
     tried = ", ".join(str(b) for b in bases)
     raise NotSunSpecError(f"no SunSpec marker at {tried} ({counted.requests} requests)")

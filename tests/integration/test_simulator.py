@@ -29,6 +29,7 @@ from bridge.core.simulation import advance, build_movers, initial_image
 from bridge.modbus.frame import CoilWordRequest, request_pdu, response_values
 from bridge.modbus.null_modem import null_modem
 from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator, two_byte_count_frame
+from tests.library.layout import has_no_status
 
 Client = AsyncModbusTcpClient | AsyncModbusSerialClient
 NAMES = builtin_mapping_names()
@@ -40,6 +41,7 @@ STATUS = {  # the simulated device is running and healthy
     "vacon_nx": True,
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
+    "eastron_sdm630": ("demand_period", 15),
     "nastec_vasco": ("operating_frequency", 40),
     "p2_vfd": ("max_output_frequency", 60.5),
     "soft_starter": ("soft_start_time", 20),
@@ -147,7 +149,9 @@ async def test_initial_values_read_back_decoded(name: str) -> None:
             assert value in {False, *(labels.get(raw) for raw in point.entity.normal)}, key
         elif point.entity.kind == "number" and value is None:
             pytest.fail(f"{key} reads as a sentinel")
-    assert sim.value(1, mapping(name).status or "") == STATUS[name]
+    status = mapping(name).status
+    assert status is None or sim.value(1, status) == STATUS[name]
+    assert (status is None) is has_no_status(mapping(name))  # a meter has no status word
     assert sim.writes == []
 
 

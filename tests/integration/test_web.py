@@ -165,6 +165,12 @@ async def test_commissioning_runs_through_the_management_code(
         assert scan.status == 200 and scan.json()["status"] == "ok", scan.body
         found = {f["unit"]: f["device"] for f in scan.json()["data"]["found"]}
         assert found == {PUMP: "pump", STARTER: "starter"}
+        body = {"bus": "tcp", "units": [PUMP, STARTER], "timeout": 0.3}
+        identified = (await http(s.port, "POST", "/api/request/device/identify", body)).json()
+        assert identified["status"] == "ok", identified
+        summaries = {f["unit"]: f["summary"] for f in identified["data"]["found"]}
+        assert summaries[STARTER].startswith("answers like Generic Motor soft-starter"), summaries
+        assert set(summaries) == {PUMP, STARTER}
 
         body = {"bus": "tcp", "unit": STARTER, "address": 0x1001, "count": 2}
         read = (await http(s.port, "POST", "/api/request/device/read", body)).json()

@@ -100,6 +100,9 @@ async def test_a_technician_sees_values_change_a_device_drop_out_and_a_scan(
         await page.until(f"{starter}.includes('starter')", timeout=20)
         assert await page.evaluate(text("#scan-status")) == "2 of 5 units answered on tcp"
         assert "pump" in await page.evaluate(text('#scan-result tr[data-unit="1"]'))
+        identified = text('#scan-result tr[data-unit="3"] td.identity')
+        await page.until(f"{identified}.startsWith('answers like')", timeout=30)
+        assert "(soft_starter)" in await page.evaluate(identified)
         await _screenshot(page, tmp_path, "web-commissioning.png")
 
 

@@ -19,8 +19,9 @@ OPTIONS = {"m": {"choices": ["a", "b"], "default": "a", "description": "model"}}
 
 
 def rows_of(entities: dict[str, dict[str, Any]], **top: Any) -> list[str]:
-    """The library's convention rows of a mapping that loads all the same."""
-    return library_problems(make_mapping(entities, **top))
+    """The library's convention rows of a mapping that loads all the same (with its index
+    entry: the row of a missing one is tests/unit/test_library.py's)."""
+    return library_problems(make_mapping(entities, **({"library": {"category": "drive"}} | top)))
 
 
 @pytest.mark.parametrize(

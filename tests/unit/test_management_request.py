@@ -8,6 +8,7 @@ import pytest
 
 from bridge.core.management_request import (
     REQUESTS,
+    DeviceIdentify,
     DeviceRead,
     DeviceScan,
     DeviceWrite,
@@ -134,6 +135,29 @@ def test_every_request_has_a_model() -> None:
         "device/read",
         "device/write",
         "device/scan",
+        "device/identify",
         "mapping/reload",
         "health_check",
     }
+
+
+def test_identify_takes_a_unit_or_units() -> None:
+    one = parse_request("device/identify", b'{"unit": 3}')
+    assert isinstance(one, DeviceIdentify) and one.unit_ids() == [3]
+    many = parse_request("device/identify", b'{"units": "5,1-2", "timeout": 0.2}')
+    assert isinstance(many, DeviceIdentify) and many.unit_ids() == [1, 2, 5]
+    for payload, words in [
+        (b'{"unit": 3, "units": [1]}', "give unit or units"),
+        (b"{}", "give unit or units"),
+        (b'{"unit": 248}', "unit: Input should be less than or equal to 247"),
+        (b'{"units": "1-248"}', "1..247"),
+        (b'{"units": [1], "timeout": 6}', "timeout"),
+    ]:
+        with pytest.raises(RequestError, match=words):
+            _unit_ids(payload)
+
+
+def _unit_ids(payload: bytes) -> list[int]:
+    parsed = parse_request("device/identify", payload)
+    assert isinstance(parsed, DeviceIdentify)
+    return parsed.unit_ids()

@@ -23,6 +23,7 @@ from bridge.core.planner import limits_for
 from bridge.errors import MappingError
 from tests.factory import make_mapping
 
+NO_ENTRY = "library: a shipped mapping has its index entry (docs/mappings.md, Library)"
 HEADER = """
 manufacturer: Test
 model: T1
@@ -598,7 +599,7 @@ entities:
         ],
         ["protocol.addressing.offset", "entities.speed.scale"],
     ]
-    assert all(r.warnings == ("entities.coil.name: 'STATUS' is written in capitals: write "
+    assert all(r.warnings == (NO_ENTRY, "entities.coil.name: 'STATUS' is written in capitals: write "
                "it as a word, or add the abbreviation to bridge/core/convention.py "
                "('Relay STATUS')",) for r in reports)  # fmt: skip
     # a user's file is not held to the library's conventions
@@ -634,6 +635,7 @@ entities:
         "takes two addresses) (holding 6)",
     )
     assert report.warnings == (
+        NO_ENTRY,
         "entities.mode.name: 'MODE' is written in capitals: write it as a word, or add the "
         "abbreviation to bridge/core/convention.py ('Motor MODE')",
     )

@@ -283,8 +283,27 @@ async function scan(form) {
   const table = $("#scan-result");
   table.hidden = false;
   $("tbody", table).replaceChildren(...data.found.map((f) => row(
-    [el("td", f.unit, "num"), f.answer, f.detail, el("td", `${f.latency_ms} ms`, "num"), f.device || "–"],
+    [el("td", f.unit, "num"), f.answer, f.detail, el("td", `${f.latency_ms} ms`, "num"), f.device || "–",
+      el("td", "identifying…", "identity")],
     { "data-unit": f.unit })));
+  if (data.found.length) await identify(data.bus, data.found.map((f) => f.unit), status);
+}
+
+// What each unit found is (device/identify, read-only), in the scan table's last column.
+async function identify(bus, units, status) {
+  const cells = () => $("#scan-result tbody").querySelectorAll("td.identity");
+  try {
+    const data = await request("device/identify", { bus, units });
+    const found = new Map(data.found.map((f) => [f.unit, f]));
+    for (const cell of cells()) {
+      const identity = found.get(Number(cell.parentElement.dataset.unit));
+      cell.textContent = identity ? identity.summary : "no answer";
+      if (identity && identity.config) cell.title = `config:\n${identity.config}`;
+    }
+  } catch (error) {
+    for (const cell of cells()) cell.textContent = "–";
+    status.textContent += ` (identify: ${error.message})`;
+  }
 }
 
 async function read(form) {

@@ -1,0 +1,1 @@
+"""Device library cross-checks: independent sources transcribed as data."""

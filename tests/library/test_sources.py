@@ -1,0 +1,221 @@
+"""Every transcribed source definition is well-formed, and every library device is listed."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from tests.library.source import (
+    TABLES,
+    TYPES,
+    UNITS,
+    WORD_ORDERS,
+    SourceDefinition,
+    SourcePoint,
+    disagreements,
+    overlaps,
+    registers,
+)
+from tests.library.sources import SOURCES
+
+# the meters issue 37 names; a device with no independent source maps to ()
+DEVICES = frozenset(
+    {
+        "eastron_sdm630",
+        "eastron_sdm120",
+        "eastron_sdm230",
+        "eastron_sdm72d_m",
+        "abb_b23",
+        "carlo_gavazzi_em24",
+        "carlo_gavazzi_em340",
+        "chint_dtsu666",
+        "chint_ddsu666",
+        "orno_we514",
+        "orno_we516",
+    }
+)
+SOURCE_NAMES = re.compile(
+    r"^(mbmd|evcc|openems|openwb|tasmota|victron|vendor|(ha-)?community:[\w.-]+/[\w.-]+)$"
+)
+REPO_REF = re.compile(r"^[\w.-]+/[\w.-]+@[0-9a-f]{40}:\S+$")
+KEY = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
+# (device, source, key, other key) pairs where a source really reads one register twice
+SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
+# "<key> <field>" where a device's sources read a point differently (field "key": a start
+# address read under different keys); the mapping authors resolve each one in their notes
+KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
+    "eastron_sdm630": frozenset({"frequency scale"}),
+    "carlo_gavazzi_em24": frozenset(
+        {
+            "current_l1 scale",
+            "current_l2 scale",
+            "current_l3 scale",
+            "frequency type",
+            "energy_import address",
+        }
+    ),
+    "carlo_gavazzi_em340": frozenset({"frequency type"}),
+    "carlo_gavazzi_em24_e1": frozenset(
+        {"frequency type"}
+        | {
+            f"{key} table"
+            for key in (
+                "voltage_l1",
+                "voltage_l2",
+                "voltage_l3",
+                "current_l1",
+                "current_l2",
+                "current_l3",
+                "power_l1",
+                "power_l2",
+                "power_l3",
+                "power",
+                "frequency",
+                "energy_import",
+                "energy_import_l1",
+                "energy_import_l2",
+                "energy_import_l3",
+                "energy_export",
+            )
+        }
+    ),
+    "chint_dtsu666": frozenset(
+        {"energy_import address", "energy_export address", "power_factor scale"}
+        | {
+            f"{key} table"
+            for key in (
+                "voltage_l1",
+                "voltage_l2",
+                "voltage_l3",
+                "current_l1",
+                "current_l2",
+                "current_l3",
+                "power",
+                "power_l1",
+                "power_l2",
+                "power_l3",
+                "power_factor",
+                "frequency",
+                "energy_export",
+            )
+        }
+    ),
+    "chint_ddsu666": frozenset(
+        {"0x4000 key", "energy_export address"}
+        | {f"{key} table" for key in ("voltage", "current", "power", "frequency", "energy_export")}
+    ),
+    "orno_we514": frozenset(
+        {
+            "frequency type",
+            "voltage type",
+            "power_factor type",
+            "energy_total type",
+            "energy_total scale",
+            "reactive_energy_total type",
+            "reactive_energy_total scale",
+        }
+    ),
+    "orno_we516": frozenset(
+        {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
+    ),
+}
+
+DEFINITIONS = [d for defs in SOURCES.values() for d in defs]
+IDS = [f"{d.device}-{d.source}" for d in DEFINITIONS]
+
+
+def test_every_device_is_listed() -> None:
+    assert not DEVICES - SOURCES.keys(), "devices without a SOURCES entry"
+
+
+@pytest.mark.parametrize(("device", "definitions"), SOURCES.items())
+def test_definitions_belong_to_their_device(
+    device: str, definitions: tuple[SourceDefinition, ...]
+) -> None:
+    assert all(d.device == device for d in definitions)
+    sources = [d.source for d in definitions]
+    assert len(sources) == len(set(sources)), "one definition per device per source"
+
+
+@pytest.mark.parametrize("definition", DEFINITIONS, ids=IDS)
+def test_definition_is_well_formed(definition: SourceDefinition) -> None:
+    assert SOURCE_NAMES.match(definition.source)
+    if definition.source != "vendor":
+        assert REPO_REF.match(definition.ref), definition.ref
+    assert definition.points
+    keys = [p.key for p in definition.points]
+    assert len(keys) == len(set(keys)), "keys unique per definition"
+    for p in definition.points:
+        assert KEY.match(p.key), p.key
+        assert p.table in TABLES, p
+        assert p.type in TYPES, p
+        assert p.unit in UNITS, p
+        assert p.word_order in WORD_ORDERS, p
+        assert p.scale > 0, p
+        assert p.address >= 0 and registers(p).stop <= 65536, p
+
+
+@pytest.mark.parametrize("definition", DEFINITIONS, ids=IDS)
+def test_points_do_not_overlap(definition: SourceDefinition) -> None:
+    for first, second, address in overlaps(definition):
+        pair = (definition.device, definition.source, first, second)
+        assert pair in SHARED_REGISTERS, f"{second} overlaps {first} at {address:#06x}"
+
+
+def test_shared_registers_are_real() -> None:
+    """Every declared exception names two points of one definition that do overlap."""
+    for device, source, first, second in SHARED_REGISTERS:
+        (definition,) = [d for d in SOURCES[device] if d.source == source]
+        points = {p.key: p for p in definition.points}
+        a, b = points[first], points[second]
+        assert a.table == b.table and set(registers(a)) & set(registers(b))
+
+
+@pytest.mark.parametrize(("device", "definitions"), SOURCES.items())
+def test_disagreements_are_declared(device: str, definitions: tuple[SourceDefinition, ...]) -> None:
+    found = {f"{d.key} {d.field}" for d in disagreements(definitions)}
+    assert found == KNOWN_DISAGREEMENTS.get(device, frozenset())
+
+
+def test_known_disagreements_name_listed_devices() -> None:
+    assert KNOWN_DISAGREEMENTS.keys() <= SOURCES.keys()
+
+
+def _definition(source: str, *points: SourcePoint) -> SourceDefinition:
+    return SourceDefinition("demo", source, f"demo/{source}@{'0' * 40}:x", points)
+
+
+def test_overlaps_finds_a_shared_register() -> None:
+    a = SourcePoint("power", "input", 0x0C, "f32", "W")
+    b = SourcePoint("power_l1", "input", 0x0D, "u16", "W")
+    c = SourcePoint("current", "holding", 0x0C, "u16", "A")
+    assert overlaps(_definition("x", a, b, c)) == [("power", "power_l1", 0x0D)]
+    assert overlaps(_definition("x", a, c)) == []
+
+
+def test_disagreements_compare_each_field() -> None:
+    base = SourcePoint("power", "input", 0x0C, "s32", "W", 0.1)
+    same_in_kw = SourcePoint("power", "input", 0x0C, "s32", "kW", 0.0001)
+    assert disagreements((_definition("a", base), _definition("b", same_in_kw))) == []
+    moved = SourcePoint("power", "holding", 0x0E, "s32", "W", 0.1, "little")
+    found = disagreements((_definition("a", base), _definition("b", moved)))
+    assert [(d.key, d.field) for d in found] == [
+        ("power", "table"),
+        ("power", "address"),
+        ("power", "word_order"),
+    ]
+    assert found[1].values == (("a", "0x000c"), ("b", "0x000e"))
+
+
+def test_disagreements_ignore_the_word_order_of_one_register() -> None:
+    big = SourcePoint("frequency", "input", 0x33, "u16", "Hz", 0.1)
+    little = SourcePoint("frequency", "input", 0x33, "u16", "Hz", 0.1, "little")
+    assert disagreements((_definition("a", big), _definition("b", little))) == []
+
+
+def test_disagreements_find_one_register_under_two_keys() -> None:
+    imp = SourcePoint("energy_import", "input", 0x4000, "f32", "kWh")
+    exp = SourcePoint("energy_export", "input", 0x4000, "f32", "kWh")
+    found = disagreements((_definition("a", imp), _definition("b", exp)))
+    assert [(d.key, d.field) for d in found] == [("0x4000", "key")]
