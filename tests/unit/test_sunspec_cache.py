@@ -12,6 +12,8 @@ from typing import Any
 import pytest
 
 from bridge.config import load_config_data
+from bridge.core.identify import snippet
+from bridge.core.yaml_source import parse_yaml
 from bridge.errors import ConfigError, DeviceExceptionError
 from bridge.sunspec import cache
 from bridge.sunspec.image import build_image
@@ -164,3 +166,12 @@ def test_no_cache_without_its_signature(tmp_path: Path) -> None:
     cache.store(tmp_path, "inverter", chain, mapping, bases=None, read_limit=125)
     cache.paths(tmp_path, "inverter")[1].unlink()
     assert cache.load(tmp_path, "inverter", None, 125) is None
+
+
+def test_the_snippet_identify_prints_for_a_sunspec_device_is_a_valid_device(
+    tmp_path: Path,
+) -> None:
+    (entry,) = parse_yaml(snippet("tcp", 3, "sunspec"), "identify's snippet")
+    loaded = load(tmp_path, entry)
+    assert loaded.config.devices[0].is_sunspec
+    assert loaded.mappings[entry["id"]].entities == {}  # built at its first walk
