@@ -291,7 +291,7 @@ class Management:
         if unknown:
             raise RequestError(f"devices: no such devices {unknown}")
         if request.rewalk:
-            return await self._rewalk(wanted if request.devices is not None else None)
+            return await self.sunspec.rewalk_many(wanted if request.devices is not None else None)
         settings = {d: devices[d].device for d in wanted}
         if request.mapping is not None:  # one device switches to another mapping
             (device_id,) = wanted
@@ -314,23 +314,6 @@ class Management:
             if changed:
                 await self._on_reload(changed)
         return {"reloaded": wanted, "changed": changed}
-
-    async def _rewalk(self, wanted: list[str] | None) -> dict[str, Any]:
-        """Walk and build the SunSpec devices named (None: all) again, one at a time."""
-        sunspec = self.sunspec.ids
-        if wanted is None:
-            wanted = list(sunspec)
-        other = [d for d in wanted if d not in sunspec]
-        if other:
-            raise RequestError(f"devices: not mapping: sunspec devices {other}")
-        changed, failed = [], {}
-        for device_id in wanted:
-            try:
-                if await self.sunspec.rewalk(device_id):
-                    changed.append(device_id)
-            except (BridgeError, ValueError) as exc:
-                failed[device_id] = str(exc)
-        return {"reloaded": wanted, "changed": changed, "failed": failed}
 
     async def swap_mapping(self, device_id: str, mapping: Mapping) -> None:
         """Poll a device with another mapping from now on, as a reload does (its poller

@@ -27,10 +27,12 @@ import logging
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from bridge.config import LoadedConfig
 from bridge.config.loading import MAX_READ_REGISTERS
 from bridge.core.entity import Table
+from bridge.core.management_request import RequestError
 from bridge.core.mapping import Mapping
 from bridge.core.request import Read
 from bridge.errors import BridgeError, NotSunSpecError
@@ -75,6 +77,23 @@ class SunSpecDevices:
         poller = self.engine.device(device_id)
         chain, built = await build_from_device(self._reader(poller), *self._bounds(poller))
         return await self._install(device_id, chain, built)
+
+    async def rewalk_many(self, wanted: list[str] | None) -> dict[str, Any]:
+        """``mapping/reload`` with ``rewalk``: the SunSpec devices named (None: all) walked
+        and built again, one at a time; a device that is not one is refused."""
+        ids = self.ids
+        wanted = list(ids) if wanted is None else wanted
+        other = [d for d in wanted if d not in ids]
+        if other:
+            raise RequestError(f"devices: not mapping: sunspec devices {other}")
+        changed, failed = [], {}
+        for device_id in wanted:
+            try:
+                if await self.rewalk(device_id):
+                    changed.append(device_id)
+            except (BridgeError, ValueError) as exc:
+                failed[device_id] = str(exc)
+        return {"reloaded": wanted, "changed": changed, "failed": failed}
 
     # --- one device ---------------------------------------------------------------------
 
