@@ -44,13 +44,18 @@ from bridge.core.mapping import (
 )
 from bridge.core.simulation import initial_image
 from bridge.core.topics import Topics
+from bridge.sunspec.image import build_image
+from bridge.sunspec.mapping import build_mapping
 from tests.factory import make_mapping
 from tests.library.layout import has_no_status
+from tests.sunspec_devices import every_image
+from tests.sunspec_reference import walked
 from tests.unit.test_shared_register import ENTITIES, MODE
 
 TOPICS = Topics("modbus", "homeassistant")
 ORIGIN = Origin(sw_version="test")
 GOLDEN = Path(__file__).resolve().parent.parent / "golden" / "discovery"
+SUNSPEC_IMAGES = every_image()
 STATE = "modbus/dev"
 AVAILABILITY = [{"topic": "modbus/bridge/state"}, {"topic": "modbus/dev/availability"}]
 
@@ -1035,6 +1040,32 @@ def test_shipped_mapping_snapshot(name: str) -> None:
     device = _shipped(name)
     payload = build_device_discovery(device, TOPICS, ORIGIN, health=True, **_as_read(device))
     _check_snapshot(name, payload)
+
+
+SUNSPEC_SNAPSHOTS = ("inverter_mppt", "meter", "battery", "device_1547")
+
+
+@pytest.mark.parametrize("name", SUNSPEC_SNAPSHOTS)
+def test_sunspec_device_snapshot(name: str) -> None:
+    """What Home Assistant gets for a SunSpec device's built mapping (an inverter with four
+    MPPTs, a meter, a battery, pysunspec2's 1547 device), dangerous writes allowed so its
+    settings are offered too: ``make test-ha`` checks each against both Home Assistant
+    versions (tools/check_ha_discovery.py)."""
+    image = build_image(SUNSPEC_IMAGES[name], 40000, name)
+    built = build_mapping(walked(image), image.registers)
+    device = DeviceInfo(
+        id=f"sunspec_{name}",
+        name=f"SunSpec {name}",
+        mapping=built.mapping(),
+        options={},
+        bus="rs485",
+        unit=1,
+        allow_dangerous_writes=True,
+        fast_interval=2.0,
+        slow_interval=60.0,
+    )
+    payload = build_device_discovery(device, TOPICS, ORIGIN, health=True, **_as_read(device))
+    _check_snapshot(f"sunspec_{name}", payload)
 
 
 def test_bridge_snapshot() -> None:
