@@ -37,6 +37,9 @@ The wiring: the parts call back into the bridge, and every callback is named in
   ``read=state.again`` (its state, changed or not);
 - a management request: ``_route`` -> ``_request`` -> ``_answer`` -> ``_respond`` (->
   ``state.queue``); a reload: ``Management(on_reload=_reloaded)`` -> ``state.reloaded``;
+  a ``mapping: sunspec`` device's mapping, built or rebuilt by ``management.sunspec``
+  (bridge/sunspec_devices.py, run with the engine) -> ``Management.swap_mapping`` -> the
+  same ``_reloaded``;
 - the MQTT side: ``run_with_reconnect(session=_session, on_state=_mqtt_is)``; a session's
   publishing tasks are ``state.run``, ``state.refresh``, ``state.home_assistant_returns``
   and ``_health_reports``.

@@ -128,7 +128,7 @@ class DiscoveryPublisher:
         """Devices whose discovery waits for their first poll."""
         if self._mqtt.discovery == "off":
             return []
-        return [d for d in self.engine.devices if d not in self._sent]
+        return [d for d, p in self.engine.devices.items() if d not in self._sent and p.points]
 
     def _device_info(self, poller: DevicePoller) -> DeviceInfo:
         device = poller.device
@@ -191,8 +191,8 @@ class DiscoveryPublisher:
             )
             await self._send(client, bridge_messages, current)
         for device_id, poller in self.engine.devices.items():
-            if only is not None and device_id != only:
-                continue
+            if (only is not None and device_id != only) or not poller.points:
+                continue  # (no points: a SunSpec device not walked yet)
             messages = self.discovery_for(poller)
             current.update(m.topic for m in messages)  # not ready yet: its config stays
             if not self.ready(poller):

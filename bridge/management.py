@@ -77,6 +77,7 @@ from bridge.modbus.engine import Engine
 from bridge.modbus.identify import identify, request_bound
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import BusScheduler, Priority
+from bridge.sunspec_devices import SunSpecDevices
 
 Reloaded = Callable[[list[str]], Awaitable[None]]
 MAX_RAW = 2  # raw reads and writes waiting per bus; more are answered "busy"
@@ -102,6 +103,9 @@ class Management:
         self._mqtt_state = mqtt_state
         self.instance = instance  # this run, named in info and health checks
         self._reloading = asyncio.Lock()
+        # the mapping: sunspec devices' walks, run beside the engine's polls
+        self.sunspec = SunSpecDevices(loaded, engine, swap=self.swap_mapping)
+        engine.companions.append(self.sunspec.run)
         self._scanning: set[str] = set()  # buses with a scan running
         self._raw: Counter[str] = Counter()  # raw requests waiting or running, per bus
 
@@ -286,6 +290,8 @@ class Management:
         unknown = [d for d in wanted if d not in devices]
         if unknown:
             raise RequestError(f"devices: no such devices {unknown}")
+        if request.rewalk:
+            return await self.sunspec.rewalk_many(wanted if request.devices is not None else None)
         settings = {d: devices[d].device for d in wanted}
         if request.mapping is not None:  # one device switches to another mapping
             (device_id,) = wanted
@@ -304,11 +310,21 @@ class Management:
                 if fresh[d] != self.loaded.mappings.get(d) or settings[d] != devices[d].device
             ]
             for device_id in changed:
-                await self.engine.replace_mapping(device_id, fresh[device_id], settings[device_id])
-                self.loaded.mappings[device_id] = fresh[device_id]
+                await self._replace(device_id, fresh[device_id], settings[device_id])
             if changed:
                 await self._on_reload(changed)
         return {"reloaded": wanted, "changed": changed}
+
+    async def swap_mapping(self, device_id: str, mapping: Mapping) -> None:
+        """Poll a device with another mapping from now on, as a reload does (its poller
+        afresh, discovery and state again): a SunSpec device's built mapping."""
+        async with self._reloading:
+            await self._replace(device_id, mapping, self.engine.device(device_id).device)
+            await self._on_reload([device_id])
+
+    async def _replace(self, device_id: str, mapping: Mapping, device: DeviceConfig) -> None:
+        await self.engine.replace_mapping(device_id, mapping, device)
+        self.loaded.mappings[device_id] = mapping
 
     def _switch_to(self, mapping: str) -> str:
         """The mapping a switch may load: a shipped name, or the resolved path of a .yaml
@@ -335,6 +351,9 @@ class Management:
         loaded: dict[str, Mapping] = {}
         errors: list[str] = []
         for device_id, device in settings.items():
+            if device.is_sunspec:  # built from its chain: kept (a rewalk builds it again)
+                loaded[device_id] = self.loaded.mappings[device_id]
+                continue
             bus = self.engine.schedulers[device.bus].transport.bus
             mapping, problems = load_device_mapping(device, bus, self.loaded.path.parent)
             errors += problems

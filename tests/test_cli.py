@@ -42,6 +42,22 @@ def test_check_example_config_exits_0() -> None:
     assert "ok (2 bus(es), 5 device(s)" in result.stdout
 
 
+def test_check_says_a_sunspec_device_is_built_at_its_first_walk(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        "buses: [{id: lan, transport: tcp, host: 127.0.0.1}]\n"
+        "devices: [{id: inverter, bus: lan, unit: 1, mapping: sunspec}]\n"
+    )
+    assert main(["check", "-c", str(config)]) == 0
+    assert capsys.readouterr().out == (
+        f"{config}: ok (1 bus(es), 1 device(s), 0 entities; "
+        "1 SunSpec device(s) built at their first walk)\n"
+    )
+    assert not (tmp_path / "state").exists()  # a check writes nothing
+
+
 def test_check_bad_config_exits_2_naming_the_field(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text(SITE.read_text().replace("unit: 3", "unit: 0"))

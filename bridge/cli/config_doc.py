@@ -242,6 +242,13 @@ def _sections(schema: Schema) -> Iterator[Section]:
     yield Section(
         "devices-protocol", "`devices[].protocol`", "ProtocolOverride", defs["ProtocolOverride"]
     )
+    yield Section(
+        "devices-sunspec",
+        "`devices[].sunspec`",
+        "SunSpecConfig",
+        defs["SunSpecConfig"],
+        "Only with `mapping: sunspec` (see the README, SunSpec devices).",
+    )
 
 
 def _bus_kinds(schema: Schema) -> list[tuple[str, str, str]]:
@@ -334,6 +341,7 @@ _ANCHORS = {
     "DeviceConfig": ("devices[]", "devices"),
     "PollConfig": ("devices[].poll", "devices-poll"),
     "ProtocolOverride": ("devices[].protocol", "devices-protocol"),
+    "SunSpecConfig": ("devices[].sunspec", "devices-sunspec"),
 }
 
 

@@ -166,9 +166,11 @@ def _check(args: argparse.Namespace, out: TextIO) -> int:
     entities = sum(
         len(loaded.mappings[d.id].active(d.options)) for d in config.devices if d.enabled
     )
+    pending = sum(1 for d in config.devices if d.enabled and not loaded.mappings[d.id].entities)
+    walked = f"; {pending} SunSpec device(s) built at their first walk" if pending else ""
     print(
         f"{args.config}: ok ({len(config.buses)} bus(es), {len(config.devices)} device(s), "
-        f"{entities} entities)",
+        f"{entities} entities{walked})",
         file=out,
     )
     return EXIT_OK

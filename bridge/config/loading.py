@@ -39,6 +39,10 @@ from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
 from bridge.core.mapping import resolve_mapping_path as _resolve
 from bridge.core.yaml_source import parse_yaml
 from bridge.errors import ConfigError, MappingError
+from bridge.sunspec import cache as sunspec_cache
+
+DEFAULT_STATE = Path("state")  # ManagementConfig.state_dir's default
+MAX_READ_REGISTERS = 125  # a SunSpec walk's read limit unless the device's protocol says less
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,7 +79,8 @@ def load_config_data(data: object, path: Path) -> LoadedConfig:
     except ValidationError as exc:
         rows = with_ids(format_validation_errors(exc), data)
         raise ConfigError(str(path), unique(rows + _errors_of_valid_parts(data, path))) from None
-    mappings, errors = _load_mappings(config.buses, config.devices, path.parent)
+    state = path.parent / config.bridge.state_dir
+    mappings, errors = _load_mappings(config.buses, config.devices, path.parent, state)
     errors += secret_errors(config.mqtt)
     errors += web_token_errors(config.bridge.web)
     errors += device_password_errors(config.devices, mappings)
@@ -99,7 +104,8 @@ def _errors_of_valid_parts(data: dict[str, Any], path: Path) -> list[str]:
     valid_ids = {bus.id for bus in buses}
     invalid = {b.get("id") for b in raw_buses if isinstance(b, dict)} - valid_ids
     errors = reference_errors(buses, devices, invalid_buses={str(i) for i in invalid})
-    mappings, more = _load_mappings(buses, devices, path.parent)
+    state = path.parent / (bridge.state_dir if bridge is not None else DEFAULT_STATE)
+    mappings, more = _load_mappings(buses, devices, path.parent, state)
     errors += more + device_password_errors(devices, mappings)
     if mqtt is not None:
         errors += secret_errors(mqtt) + topic_errors(mqtt, devices, mappings)
@@ -131,7 +137,10 @@ _BUS: TypeAdapter[SerialBus | TcpBus] = TypeAdapter(Bus)
 
 
 def _load_mappings(
-    buses: Iterable[SerialBus | TcpBus], devices: Iterable[DeviceConfig], base: Path
+    buses: Iterable[SerialBus | TcpBus],
+    devices: Iterable[DeviceConfig],
+    base: Path,
+    state_dir: Path,
 ) -> tuple[dict[str, Mapping], list[str]]:
     loaded: dict[str, Mapping] = {}
     cache: dict[Path, Mapping] = {}
@@ -140,7 +149,9 @@ def _load_mappings(
     for device in devices:
         if device.bus not in known:
             continue  # reported as a reference
-        mapping, problems = load_device_mapping(device, known[device.bus], base, cache)
+        mapping, problems = load_device_mapping(
+            device, known[device.bus], base, cache, state_dir=state_dir
+        )
         errors += problems
         if mapping is not None:
             loaded[device.id] = mapping
@@ -152,12 +163,18 @@ def load_device_mapping(
     bus: SerialBus | TcpBus,
     base: Path,
     cache: dict[Path, Mapping] | None = None,
+    *,
+    state_dir: Path | None = None,
 ) -> tuple[Mapping | None, list[str]]:
     """A device's mapping (relative paths from ``base``) and every problem with it for
     this device, as ``devices.<id>.<field>: message`` rows: the file itself, the device's
-    options, a transport the model does not speak. The mapping is None if it cannot load."""
+    options, a transport the model does not speak. The mapping is None if it cannot load.
+    A ``mapping: sunspec`` device's is the one cached under ``state_dir`` (bridge/sunspec/
+    cache.py), else one with no entity until its chain is walked (bridge/sunspec_devices.py)."""
     where = f"devices.{device.id}"
     cache = {} if cache is None else cache
+    if device.is_sunspec:
+        return _sunspec_mapping(device, bus, state_dir or base / DEFAULT_STATE)
     try:
         path = _resolve(device.mapping, base)
         mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
@@ -181,3 +198,18 @@ def load_device_mapping(
     if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
         errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
     return mapping, errors
+
+
+def _sunspec_mapping(
+    device: DeviceConfig, bus: SerialBus | TcpBus, state_dir: Path
+) -> tuple[Mapping, list[str]]:
+    """A SunSpec device's cached mapping (or the pending one) and the settings it cannot
+    have: options (a built mapping has none), Modbus ASCII. Its ``poll.entities`` name
+    entities of a mapping not built yet: one that names none is not an error."""
+    where = f"devices.{device.id}"
+    errors = [f"{where}.options.{o}: a SunSpec mapping has no options" for o in device.options]
+    if bus.transport == "ascii":
+        errors.append(f"{where}.bus: SunSpec devices are read over tcp, rtu and rtu-over-tcp")
+    limit = device.protocol.max_read_registers or MAX_READ_REGISTERS
+    cached = sunspec_cache.load(state_dir, device.id, device.sunspec_bases, limit)
+    return (cached.mapping if cached is not None else sunspec_cache.pending()), errors

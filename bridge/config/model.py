@@ -126,12 +126,43 @@ class ProtocolOverride(Strict):
     response_timeout: Duration | None = Field(None, gt=0)
 
 
+SUNSPEC = "sunspec"  # a device's mapping built from its SunSpec model chain
+MAX_SUNSPEC_BASE = 65532  # the marker and the first model's ID and L fit below 65536
+
+
+def _sunspec_base(value: object) -> object:
+    """``auto`` or a register the marker and a model header fit after; one message."""
+    if value == "auto" or (
+        isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_SUNSPEC_BASE
+    ):
+        return value
+    raise ValueError(f"auto, or the holding register of the SunS marker (0..{MAX_SUNSPEC_BASE})")
+
+
+class SunSpecConfig(Strict):
+    """Where a ``mapping: sunspec`` device's ``SunS`` marker is."""
+
+    base: Annotated[
+        Literal["auto"] | Annotated[int, Field(ge=0, le=MAX_SUNSPEC_BASE)],
+        BeforeValidator(_sunspec_base),
+    ] = Field(
+        "auto",
+        description="holding register of the SunS marker; auto tries 40000, 50000, then 0",
+    )
+
+
 class DeviceConfig(Strict):
     id: str
     name: str | None = None
     bus: str
     unit: int = Field(ge=1, le=255, description="Modbus unit id (1..247 on serial lines)")
-    mapping: str = Field(description="shipped mapping name or path to a mapping YAML file")
+    mapping: str = Field(
+        description="shipped mapping name, path to a mapping YAML file, or `sunspec`: "
+        "built from the device's SunSpec model chain (no file)"
+    )
+    sunspec: SunSpecConfig | None = Field(
+        None, description="with `mapping: sunspec`: where its marker is (default base: auto)"
+    )
     poll: PollConfig = PollConfig()
     options: dict[str, str] = Field(default_factory=dict)
     protocol: ProtocolOverride = ProtocolOverride()
@@ -178,6 +209,28 @@ class DeviceConfig(Strict):
     def _one_password_source(self) -> Self:
         one_source("password", self.password, self.password_file, self.password_env)
         return self
+
+    @model_validator(mode="after")
+    def _sunspec_with_its_mapping(self) -> Self:
+        if self.sunspec is not None and not self.is_sunspec:
+            raise ValueError(
+                f"sunspec: only with mapping: sunspec (device {self.id!r} has mapping: "
+                f"{self.mapping!r})"
+            )
+        return self
+
+    @property
+    def is_sunspec(self) -> bool:
+        """Its mapping is built from its SunSpec model chain (``mapping: sunspec``)."""
+        return self.mapping == SUNSPEC
+
+    @property
+    def sunspec_bases(self) -> tuple[int, ...] | None:
+        """The bases a walk tries (None: the walk's default order); None if not SunSpec."""
+        if not self.is_sunspec:
+            return None
+        base = (self.sunspec or SunSpecConfig()).base
+        return None if base == "auto" else (base,)
 
     @property
     def display_name(self) -> str:
@@ -318,6 +371,11 @@ class ManagementConfig(Strict):
     mapping_dirs: list[Path] = Field(
         default_factory=list,
         description="folders (relative to the config file) whose mapping files a switch may name",
+    )
+    state_dir: Path = Field(
+        Path("state"),
+        description="folder (relative to the config file) where the bridge keeps what it "
+        "learnt of devices: the mappings built for `mapping: sunspec` devices, under sunspec/",
     )
     metrics: MetricsConfig = MetricsConfig()
     web: WebConfig = WebConfig()

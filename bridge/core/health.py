@@ -67,6 +67,7 @@ class Fault(StrEnum):
     REFUSES = "refuses"  # refused every read of its polls
     BUSY = "busy"  # answered only "busy"
     LOCKED = "locked"  # locked by a password the bridge cannot unlock (``lock_reason``)
+    UNMAPPED = "unmapped"  # its mapping cannot be built yet (a SunSpec walk: ``lock_reason``)
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,9 +144,16 @@ class DeviceHealth:
         self.fault = Fault.LOCKED
         return self._offline(Fault.LOCKED, now)
 
+    def unmapped(self, now: float, reason: str) -> Transition | None:
+        """The device's mapping could not be built (a SunSpec device whose walk failed):
+        offline at once, with the reason, until a build succeeds."""
+        self.lock_reason = reason
+        self.consecutive_failures = max(self.consecutive_failures, self.policy.offline_after)
+        return self._offline(Fault.UNMAPPED, now)
+
     def offline_reason(self, now: float) -> str:
         """Why the device is offline, for the log: 'after 3 failed requests'."""
-        if self.fault is Fault.LOCKED:
+        if self.fault in (Fault.LOCKED, Fault.UNMAPPED):
             return f"({self.lock_reason})"
         if self.fault is Fault.BUSY:
             return f"after {now - self.busy_since:.0f} s: answers only 'busy'"

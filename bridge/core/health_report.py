@@ -29,6 +29,9 @@ A counter lower than before (a device rebuilt with fresh counters) counts from z
         "<device id>": {
           "bus": "<bus id>", "unit": 1,
           "state": "online",           online | offline | unknown (no verdict yet)
+          "error": null,               while offline for a reason beyond failed requests:
+                                         the reason (a SunSpec device's walk that failed,
+                                         a unit that is not SunSpec, a password lock)
           "requests": 1200,            transactions since start (a resend is one request)
           "errors": 5,                 failed requests: timeouts, bus down, failure exceptions
           "timeouts": 4,               of which no answer (or bus down)
@@ -112,6 +115,7 @@ class DeviceSnapshot:
     unknown_codes: int = 0
     counter_readings_held: int = 0
     counter_resets: int = 0
+    error: str | None = None  # offline with a reason: a failed SunSpec walk, a lock
 
     @property
     def state(self) -> str:
@@ -205,6 +209,7 @@ def _device_report(device: DeviceSnapshot, snapshot: Snapshot) -> dict[str, Any]
         "bus": device.bus,
         "unit": device.unit,
         "state": device.state,
+        "error": device.error,
         "requests": device.requests,
         "errors": device.errors,
         "timeouts": device.timeouts,

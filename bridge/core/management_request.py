@@ -125,15 +125,20 @@ class DeviceIdentify(Request):
 class MappingReload(Request):
     """Read the mapping files again (all devices, or those listed) and apply them; with
     ``mapping`` (a shipped name or a file under ``bridge.mapping_dirs``; needs
-    ``bridge.mapping_switch``), one listed device switches to that mapping."""
+    ``bridge.mapping_switch``), one listed device switches to that mapping. A ``mapping:
+    sunspec`` device keeps its built mapping, unless ``rewalk``: then the SunSpec devices
+    (all, or those listed: only SunSpec devices) are walked and built again."""
 
     devices: list[str] | None = Field(None, max_length=1000)
     mapping: str | None = Field(None, min_length=1, max_length=1024)
+    rewalk: bool = False
 
     @model_validator(mode="after")
     def _one_device_for_a_new_mapping(self) -> Self:
         if self.mapping is not None and (self.devices is None or len(self.devices) != 1):
             raise ValueError("mapping: name exactly one device in devices to switch it")
+        if self.mapping is not None and self.rewalk:
+            raise ValueError("rewalk: a SunSpec device's mapping is built, not switched")
         return self
 
 

@@ -12,12 +12,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Coroutine, Iterable
+from typing import Any
 
 from bridge.config import DeviceConfig, LoadedConfig, SerialBus, TcpBus
 from bridge.core.codec import Value
 from bridge.core.guard import UNGUARDED, Guard
-from bridge.core.health import HealthPolicy
+from bridge.core.health import Fault, HealthPolicy
 from bridge.core.health_report import BusSnapshot, DeviceSnapshot, Snapshot, WriteSnapshot
 from bridge.core.mapping import Mapping
 from bridge.core.timing import LinkTiming, Mode
@@ -74,6 +75,8 @@ class Engine:
         self._policy = policy
         self._group: asyncio.TaskGroup | None = None
         self._tasks: dict[str, asyncio.Task[None]] = {}
+        # work that runs while the engine runs (and stops with it): the SunSpec walks
+        self.companions: list[Callable[[], Coroutine[Any, Any, None]]] = []
         for device in config.devices:
             if device.enabled:
                 self.devices[device.id] = self._poller(device, loaded.mappings[device.id])
@@ -101,7 +104,12 @@ class Engine:
             for bus_id, scheduler in self.schedulers.items():
                 group.create_task(scheduler.run(), name=f"bus:{bus_id}")
             for device_id, poller in self.devices.items():
-                self._tasks[device_id] = group.create_task(poller.run(), name=f"device:{device_id}")
+                if poller.points:  # a SunSpec device not walked yet polls nothing
+                    self._tasks[device_id] = group.create_task(
+                        poller.run(), name=f"device:{device_id}"
+                    )
+            for companion in self.companions:
+                group.create_task(companion(), name=getattr(companion, "__name__", "companion"))
 
     async def replace_mapping(
         self, device_id: str, mapping: Mapping, device: DeviceConfig | None = None
@@ -119,8 +127,10 @@ class Engine:
         poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         poller.writer.inherit(old.writer)
         poller.state.carry_counters(old.state)
+        if old.carried is not None:  # published before a restart, before it had a mapping
+            poller.seed_counters(old.carried)
         self.devices[device_id] = poller
-        if self._group is not None:
+        if self._group is not None and poller.points:
             self._tasks[device_id] = self._group.create_task(
                 poller.run(), name=f"device:{device_id}"
             )
@@ -147,6 +157,9 @@ class Engine:
             buses=tuple(bus_snapshot(s) for s in self.schedulers.values()),
             devices=tuple(device_snapshot(p) for p in self.devices.values()),
         )
+
+
+_WITH_REASON = (Fault.LOCKED, Fault.UNMAPPED)  # offline for a reason beyond failed requests
 
 
 def bus_snapshot(scheduler: BusScheduler) -> BusSnapshot:
@@ -192,4 +205,5 @@ def device_snapshot(poller: DevicePoller) -> DeviceSnapshot:
         unknown_codes=poller.unknown_codes,
         counter_readings_held=poller.counter_readings_held,
         counter_resets=poller.counter_resets,
+        error=health.lock_reason if health.fault in _WITH_REASON and not health.online else None,
     )

@@ -107,6 +107,7 @@ class DevicePoller:
         self.counter_readings_held = 0  # counter readings not published (counters.py)
         self.counter_resets = 0
         self._held_logged: set[tuple[str, str]] = set()
+        self.carried: dict[str, object] | None = None  # seeds kept for a mapping to come
 
     # --- what the device knows and how it is reached (for readers of the poller) --------
 
@@ -294,7 +295,12 @@ class DevicePoller:
 
     def seed_counters(self, document: dict[str, object]) -> None:
         """The device's counters as published before this start (its retained document):
-        a lower first reading is then held like any other (bridge/core/counters.py)."""
+        a lower first reading is then held like any other (bridge/core/counters.py). A
+        device with no points yet (a SunSpec device not walked) keeps the document for the
+        mapping it gets (``carried``: ``Engine.replace_mapping`` seeds that poller)."""
+        if not self.points:
+            self.carried = document
+            return
         changed = self.state.seed_counters(document)
         if changed:
             log.info(

@@ -94,6 +94,7 @@ from bridge.core.simulation_counter import (
 )
 from bridge.modbus.frame import CoilWordRequest
 from bridge.modbus.sunspec_unit import ImageDevice, SunSpecUnit
+from bridge.sunspec.image import DeviceImage
 
 __all__ = ["Quirks", "SimulatedUnit", "Simulator", "SunSpecUnit", "two_byte_count_frame"]
 
@@ -382,6 +383,12 @@ class Simulator:
 
     def set_quirks(self, unit: int, quirks: Quirks) -> None:
         self._device(unit).set_quirks(quirks)
+
+    def swap_image(self, unit: int, image: DeviceImage) -> None:
+        """A SunSpec unit serves another image from now on (a firmware update)."""
+        if unit not in self._images:
+            raise KeyError(f"unit {unit} is not a SunSpec unit")
+        self._images[unit].spec = SunSpecUnit(unit, image)
 
     def image(self, unit: int) -> dict[Cell, int]:
         return dict(self._device(unit).image)

@@ -73,6 +73,7 @@ def summary(poller: DevicePoller, health: dict[str, Any]) -> dict[str, Any]:
         "bus": device.bus,
         "unit": device.unit,
         "state": health.get("state", "unknown"),
+        "error": health.get("error"),  # offline with a reason: a failed SunSpec walk
         "status": poller.values.get(mapping.status) if mapping.status else None,
         "alarms": active_alarms(poller.points, poller.values),
         "last_success": health.get("last_success"),

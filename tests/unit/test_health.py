@@ -6,6 +6,7 @@ import pytest
 
 from bridge.core.health import (
     DeviceHealth,
+    Fault,
     HealthPolicy,
     Outcome,
     Transition,
@@ -101,3 +102,17 @@ def test_exception_meaning_prefers_the_device_manual(
 ) -> None:
     meaning = exception_meaning(code, Protocol(exceptions=declared))
     assert (meaning.name, meaning.action) == (name, action)
+
+
+def test_a_device_without_its_mapping_is_offline_at_once_with_the_reason() -> None:
+    """A SunSpec device whose walk failed: offline with the reason, the next verdict says
+    nothing new, and its first answer (with a built mapping) brings it online."""
+    health = DeviceHealth(POLICY)
+    assert health.unmapped(0.0, "not a SunSpec device: no marker") is Transition.OFFLINE
+    assert health.online is False
+    assert health.fault is Fault.UNMAPPED
+    assert health.offline_reason(0.0) == "(not a SunSpec device: no marker)"
+    assert health.unmapped(1.0, "SunSpec walk failed: timeout") is None
+    assert health.offline_reason(1.0) == "(SunSpec walk failed: timeout)"
+    assert health.record(Outcome.OK, 2.0, latency=0.01) is Transition.ONLINE
+    assert health.fault is None

@@ -96,6 +96,7 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
                 "bus": "rs485",
                 "unit": 3,
                 "state": "online",
+                "error": None,
                 "requests": 390,
                 "errors": 2,
                 "timeouts": 2,

@@ -43,6 +43,12 @@ from bridge.core.management_request import (
             b'{"devices": ["pump"], "mapping": "new.yaml"}',
             MappingReload(devices=["pump"], mapping="new.yaml"),
         ),
+        ("mapping/reload", b'{"rewalk": true}', MappingReload(rewalk=True)),
+        (
+            "mapping/reload",
+            b'{"rewalk": true, "devices": ["inverter"]}',
+            MappingReload(devices=["inverter"], rewalk=True),
+        ),
         ("health_check", b"  ", HealthCheck()),
     ],
 )
@@ -71,6 +77,13 @@ def test_valid_requests(command: str, payload: bytes, expected: object) -> None:
         ("device/scan", b'{"timeout": 0}', "timeout", None),
         ("device/scan", b'{"bogus": 1, "transaction": true}', "bogus", None),
         ("mapping/reload", b'{"mapping": "x.yaml"}', "exactly one device", None),
+        (
+            "mapping/reload",
+            b'{"devices": ["pv"], "mapping": "x.yaml", "rewalk": true}',
+            "rewalk: a SunSpec device's mapping is built",
+            None,
+        ),
+        ("mapping/reload", b'{"rewalk": "maybe"}', "rewalk", None),
         ("reboot", b'{"transaction": "r"}', "unknown request 'reboot'", "r"),
     ],
 )

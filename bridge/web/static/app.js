@@ -190,6 +190,7 @@ function renderFacts(summary) {
     ["Last answer", time(summary.last_success)],
     ["Latency p50 / p95", `${ms(summary.latency_p50_ms)} / ${ms(summary.latency_p95_ms)}`],
     ["Errors", `${summary.errors} of ${summary.requests} requests (${summary.timeouts} timeouts)`]];
+  if (summary.error) facts.push(["Why offline", summary.error]);
   if (page.device && page.device.topic) facts.push(["MQTT topic", page.device.topic]);
   $("#device-facts").replaceChildren(...facts.flatMap(([term, value]) => {
     const dd = el("dd", value);
