@@ -386,9 +386,7 @@ class Simulator:
 
     def swap_image(self, unit: int, image: DeviceImage) -> None:
         """A SunSpec unit serves another image from now on (a firmware update)."""
-        if unit not in self._images:
-            raise KeyError(f"unit {unit} is not a SunSpec unit")
-        self._images[unit].spec = SunSpecUnit(unit, image)
+        self._image_device(unit).swap(image)
 
     def image(self, unit: int) -> dict[Cell, int]:
         return dict(self._device(unit).image)
@@ -459,11 +457,13 @@ class Simulator:
 
     def set_registers(self, unit: int, values: dict[int, int]) -> None:
         """Store holding registers ``{address: word}`` of the SunSpec unit ``unit``."""
+        self._image_device(unit).set_registers(values)
+
+    def _image_device(self, unit: int) -> ImageDevice:
         try:
-            image = self._images[unit]
+            return self._images[unit]
         except KeyError:
-            raise KeyError(f"no SunSpec unit {unit}") from None
-        image.set_registers(values)
+            raise KeyError(f"unit {unit} is not a SunSpec unit") from None
 
     def _device(self, unit: int) -> _Device:
         try:

@@ -42,6 +42,11 @@ class ImageDevice:
     def __post_init__(self) -> None:
         self.words = list(self.spec.image.words)
 
+    def swap(self, image: DeviceImage) -> None:
+        """Serve ``image`` from now on (a firmware update), its registers as it has them."""
+        self.spec = SunSpecUnit(self.unit, image)
+        self.words = list(image.words)
+
     def set_registers(self, values: dict[int, int]) -> None:
         """Store ``{address: word}`` within the image (ValueError outside it or not a word)."""
         image = self.spec.image
