@@ -126,7 +126,8 @@ async def test_a_sunspec_inverter_in_home_assistant(
     start = len(hass.log_records())
     since = (datetime.now(UTC) - timedelta(minutes=10)).isoformat()
     image = build_image(quiet_inverter(), 40000, "inverter")
-    built = build_mapping(walked(image), image.registers)
+    chain = await asyncio.to_thread(walked, image)  # walked() runs its own event loop
+    built = build_mapping(chain, image.registers)
     path = tmp_path / "expected.yaml"  # what the bridge will build: addresses and names
     path.write_text(built.yaml(), encoding="utf-8")
     mapping = load_mapping(path)
