@@ -18,6 +18,10 @@ from __future__ import annotations
 
 import asyncio
 import math
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the SunSpec test devices
 
 from bridge.core.entity import Table
 from bridge.core.mapping import Point

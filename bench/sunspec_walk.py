@@ -16,9 +16,13 @@ memory: the same requests a bus would carry, without a bus's latency.
 from __future__ import annotations
 
 import asyncio
+import sys
+from pathlib import Path
 from typing import Any
 
 from sunspec2.modbus import client as ss_client
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the SunSpec test devices
 
 from bridge.core.entity import Table
 from bridge.core.request import Read
