@@ -41,6 +41,16 @@ _PLAUSIBLE = {
     "%": (0.0, 100.0),
     "": (-1.0, 1.0),
     "°": (-180.0, 180.0),
+    "°C": (-20.0, 80.0),
+    "K": (0.0, 30.0),
+    "Ah": (0.0, 300.0),
+    "mA": (0.0, 63000.0),
+    "mV": (0.0, 60000.0),
+    "h": (0.0, 50000.0),
+    "min": (0.0, 1440.0),
+    "s": (0.0, 86400.0),
+    "bar": (0.0, 6.0),
+    "l/min": (0.0, 60.0),
 }
 # (source unit, mapping unit) -> factor; the same unit is 1
 _FACTORS = {
@@ -55,6 +65,14 @@ _FACTORS = {
     ("kWh", "MWh"): 1e-3,
     ("kvarh", "varh"): 1e3,
     ("varh", "kvarh"): 1e-3,
+    ("mA", "A"): 1e-3,
+    ("A", "mA"): 1e3,
+    ("mV", "V"): 1e-3,
+    ("V", "mV"): 1e3,
+    ("h", "min"): 60.0,
+    ("min", "h"): 1 / 60,
+    ("min", "s"): 60.0,
+    ("s", "min"): 1 / 60,
 }
 _FLOATS = {"f32": ">f", "f64": ">d"}  # struct formats, high byte first
 _INTEGERS = {"u16": (0, 0xFFFF), "s16": (-0x8000, 0x7FFF), "u32": (0, 0xFFFFFFFF)}

@@ -11,7 +11,8 @@ TABLES = frozenset({"input", "holding"})
 # "f64" is added to lib37's list: one community source reads an ORNO counter as float64
 TYPES = frozenset({"f32", "f64", "u16", "s16", "u32", "s32", "u64", "s64"})
 WORD_ORDERS = frozenset({"big", "little"})
-# "°" (phase angle) and "kVAh" (apparent energy) are added to lib37's list
+# "°" (phase angle) and "kVAh" (apparent energy) are added to lib37's list; temperatures,
+# durations, pressures, flows and milli-units for the inverters, chargers and heat pumps
 UNITS = frozenset(
     {
         "V",
@@ -30,6 +31,16 @@ UNITS = frozenset(
         "%",
         "",
         "°",
+        "°C",
+        "K",
+        "Ah",
+        "mA",
+        "mV",
+        "h",
+        "min",
+        "s",
+        "bar",
+        "l/min",
     }
 )
 _WIDTHS = {"u16": 1, "s16": 1, "f32": 2, "u32": 2, "s32": 2, "u64": 4, "s64": 4, "f64": 4}
