@@ -1,12 +1,13 @@
 """``modbus-mqtt-bridge demo``: the five seed devices, simulated, on MQTT in seconds.
 
 It serves the five shipped mappings as simulated units 1..5 on a loopback Modbus TCP
-port, picks a broker (``--mqtt-url``, else 127.0.0.1:1883 if something answers there,
-else a private ``mosquitto`` of its own when the binary is installed, else an embedded one
-(amqtt)), runs the real bridge against them with Home Assistant discovery,
-and shows a live table of the devices, their state and the topics to subscribe to; the
-web page (bridge/web) runs on loopback, its URL printed with the table.
-Ctrl-C (or SIGTERM) stops everything.
+port (``--site home``: a home from the device library on an RS-485 line and the LAN, with
+the bridge's gateway; bridge/cli/demo_site.py), picks a broker (``--mqtt-url``, else
+127.0.0.1:1883 if something answers there, else a private ``mosquitto`` of its own when
+the binary is installed, else an embedded one (amqtt)), runs the real bridge against them
+with Home Assistant discovery, and shows a live table of the devices, their state and the
+topics to subscribe to; the web page (bridge/web) runs on loopback, its URL printed with
+the table. Ctrl-C (or SIGTERM) stops everything.
 """
 
 from __future__ import annotations
@@ -24,11 +25,13 @@ from typing import Any, TextIO
 from bridge.app import Bridge
 from bridge.cli.demo_broker import find_mosquitto, private_mosquitto
 from bridge.cli.demo_control import FAULT_REQUEST, fault_request
+from bridge.cli.demo_site import SEEDS, SERIAL_BUS, SITES, SeedDevice, Site
 from bridge.cli.demo_view import DemoView, mosquitto_options, render_plain, render_table
 from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.errors import BridgeError, ConfigError, InputError, first_of
+from bridge.modbus.null_modem import null_modem
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from bridge.mqtt import MqttConnectError
 from bridge.mqtt.broker import PROTOCOL, embedded_broker
@@ -41,27 +44,15 @@ port, picks a broker (--mqtt-url, else 127.0.0.1:1883 if something answers there
 a private mosquitto when it is installed, else an embedded one), runs the real bridge
 against them with Home Assistant discovery, and shows a live table of the devices, their
 state and the topics to subscribe to.
+--site home simulates a home instead: a grid meter, a hybrid inverter with its battery and
+a wallbox on one RS-485 line (a virtual serial cable), which the bridge's gateway serves
+to other masters on loopback TCP, and a heat pump on the LAN (Modbus TCP).
 Ctrl-C (or SIGTERM) stops everything."""
 LOOPBACK = "127.0.0.1"
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_WEB_PORT = 8099
-
-
-@dataclass(frozen=True, slots=True)
-class SeedDevice:
-    id: str
-    name: str
-    mapping: str
-    unit: int
-
-
-SEEDS = (
-    SeedDevice("borehole_pump", "Borehole pump", "nastec_vasco", 1),
-    SeedDevice("fan_drive", "Fan drive", "p2_vfd", 2),
-    SeedDevice("booster_starter", "Booster starter", "soft_starter", 3),
-    SeedDevice("main_drive", "Main drive", "vacon_nx", 4),
-    SeedDevice("genset", "Genset", "smartgen_hgm6100", 5),
-)
+DEFAULT_GATEWAY_PORT = 5502
+__all__ = ["SEEDS", "SeedDevice", "add_parser", "demo_config", "site_data"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,12 +94,28 @@ def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--password-env", metavar="VARIABLE", help="environment variable holding the password"
     )
     demo.add_argument(
+        "--site",
+        choices=sorted(SITES),
+        default="seeds",
+        help="what to simulate: seeds (the five seed devices, default) or home (a grid meter, "
+        "a hybrid inverter with its battery and a wallbox on one RS-485 line, served to "
+        "other masters by the bridge's gateway, and a heat pump on the LAN)",
+    )
+    demo.add_argument(
         "--modbus-port",
         type=int,
         default=DEFAULT_MODBUS_PORT,
         metavar="PORT",
         help=f"loopback TCP port of the simulated devices (default {DEFAULT_MODBUS_PORT}; "
         "a free one if taken)",
+    )
+    demo.add_argument(
+        "--gateway-port",
+        type=int,
+        default=DEFAULT_GATEWAY_PORT,
+        metavar="PORT",
+        help="loopback TCP port of the bridge's gateway to the home site's RS-485 line "
+        f"(default {DEFAULT_GATEWAY_PORT}; a free one if taken)",
     )
     demo.add_argument(
         "--web-port",
@@ -150,7 +157,11 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
     if not host or not port.isdigit():
         raise InputError("--local-broker", [f"use HOST:PORT, not {args.local_broker!r}"])
     url = args.mqtt_url or f"mqtt://{args.local_broker}"
-    demo_config(BrokerChoice(url, "given"), DEFAULT_MODBUS_PORT, args)  # refuse bad options now
+    placeholder = dict.fromkeys(SITES[args.site].buses, f"{LOOPBACK}:{DEFAULT_MODBUS_PORT}")
+    placeholder |= {SERIAL_BUS: "/dev/null"} if SERIAL_BUS in placeholder else {}
+    demo_config(
+        BrokerChoice(url, "given"), placeholder, args, DEFAULT_WEB_PORT, DEFAULT_GATEWAY_PORT
+    )  # refuse bad options now
     configure_logging(args.log_level, args.log_format)
     try:
         asyncio.run(until_stopped(demo(args, out)))
@@ -166,43 +177,108 @@ def run_demo(args: argparse.Namespace, out: TextIO) -> int:
 
 
 async def demo(args: argparse.Namespace, out: TextIO) -> None:
-    """Simulator, broker, bridge and view until cancelled."""
-    simulator = Simulator(
-        [SimulatedUnit(s.unit, load_mapping(builtin_mapping_path(s.mapping))) for s in SEEDS],
-        tick=1.0,
+    """Simulators, broker, bridge and view until cancelled."""
+    site = SITES[args.site]
+    simulators = {
+        bus: Simulator(
+            [SimulatedUnit(d.unit, load_mapping(builtin_mapping_path(d.mapping))) for d in devices],
+            tick=1.0,
+        )
+        for bus in site.buses
+        if (devices := site.on(bus))
+    }
+    with contextlib.ExitStack() as cables:  # closed after the simulators' tasks have ended
+        async with asyncio.TaskGroup() as group:
+            where = _serve(simulators, group, cables, args.modbus_port)
+            async with asyncio.timeout(10):
+                for simulator in simulators.values():
+                    await simulator.ready.wait()
+            for bus, simulator in simulators.items():
+                if bus != SERIAL_BUS:
+                    where[bus] = f"{LOOPBACK}:{simulator.port}"
+            async with _broker(args.mqtt_url, args.local_broker, args.embedded_broker) as broker:
+                await _run(site, simulators, where, broker, args=args, out=out)
+
+
+def _serve(
+    simulators: dict[str, Simulator],
+    group: asyncio.TaskGroup,
+    cables: contextlib.ExitStack,
+    modbus_port: int,
+) -> dict[str, str]:
+    """Start each bus's simulator: the RS-485 line's on one end of a virtual cable (the
+    bridge opens the other end, returned), the others on loopback TCP."""
+    where: dict[str, str] = {}
+    for bus, simulator in simulators.items():
+        if bus == SERIAL_BUS:
+            device_end, where[bus] = cables.enter_context(null_modem())
+            group.create_task(simulator.serve_serial(device_end), name=f"simulator {bus}")
+        else:
+            port = _free_port(modbus_port)
+            group.create_task(simulator.serve_tcp(LOOPBACK, port), name=f"simulator {bus}")
+    return where
+
+
+async def _run(
+    site: Site,
+    simulators: dict[str, Simulator],
+    where: dict[str, str],
+    broker: BrokerChoice,
+    *,
+    args: argparse.Namespace,
+    out: TextIO,
+) -> None:
+    """The bridge on the started simulators, and the view, until cancelled."""
+    web_port = _free_port(args.web_port)
+    gateway_port = _free_port(args.gateway_port) if site.serial else 0
+    loaded = demo_config(broker, where, args, web_port, gateway_port)
+    bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
+    units = {d.id: (simulators[d.bus], d.unit) for d in site.devices}
+    bridge.extra_requests[FAULT_REQUEST] = fault_request(units)
+    mqtt = loaded.config.mqtt
+    view = DemoView(bridge, broker_url=mqtt.broker_url, broker_how=_how(broker, mqtt))
+    view.modbus = _modbus_line(site, where, gateway_port)
+    command = site.controls[0]
+    view.command = f"{args.base_topic}/{command.device}/{command.key}/set"
+    view.command_payload = command.payload
+    fault = f"{args.base_topic}/bridge/request/{FAULT_REQUEST}"
+    device, alarm = site.fault
+    view.extra += [
+        f"fault:   mosquitto_pub{mosquitto_options(mqtt)} -t {fault} -m \\",
+        f"""           '{{"device": "{device}", "fault": "{alarm}"}}'""",
+    ]
+    if site.serial:
+        served = ",".join(str(d.unit) for d in site.serial)
+        view.extra.append(
+            f"gateway: mbpoll -m tcp -p {gateway_port} {site.gateway_read} {LOOPBACK}"
+            f"  # units {served} of the RS-485 line, through the bridge"
+        )
+    view.extra.append(
+        "Ctrl-C stops: the devices stay on the broker (--keep)"
+        if args.keep
+        else "Ctrl-C stops and removes the devices from the broker (--keep: keeps)"
     )
-    async with asyncio.TaskGroup() as group:
-        port = _free_port(args.modbus_port)
-        group.create_task(simulator.serve_tcp(LOOPBACK, port, "socket"), name="simulator")
-        async with asyncio.timeout(10):
-            await simulator.ready.wait()
-        async with _broker(args.mqtt_url, args.local_broker, args.embedded_broker) as broker:
-            web_port = _free_port(args.web_port)
-            loaded = demo_config(broker, simulator.port, args, web_port)
-            bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
-            units = {seed.id: seed.unit for seed in SEEDS}
-            bridge.extra_requests[FAULT_REQUEST] = fault_request(simulator, units)
-            mqtt = loaded.config.mqtt
-            view = DemoView(bridge, broker_url=mqtt.broker_url, broker_how=_how(broker, mqtt))
-            view.modbus = f"{LOOPBACK}:{simulator.port}"
-            fault = f"{args.base_topic}/bridge/request/{FAULT_REQUEST}"
-            view.extra += [
-                f"fault:   mosquitto_pub{mosquitto_options(mqtt)} -t {fault} -m \\",
-                f"""           '{{"device": "{SEEDS[0].id}", "fault": "alarm_dry_running"}}'""",
-            ]
-            view.extra.append(
-                "Ctrl-C stops: the devices stay on the broker (--keep)"
-                if args.keep
-                else "Ctrl-C stops and removes the devices from the broker (--keep: keeps)"
-            )
-            try:
-                async with asyncio.TaskGroup() as inner:
-                    inner.create_task(bridge.run(), name="bridge")
-                    show = _show_plain if args.plain or not out.isatty() else _show_live
-                    await show(view, out)
-            except* MqttConnectError as failed:
-                failure = first_of(failed, MqttConnectError) or failed
-                raise DemoBrokerError(_advice(failure, broker)) from None
+    try:
+        async with asyncio.TaskGroup() as inner:
+            inner.create_task(bridge.run(), name="bridge")
+            show = _show_plain if args.plain or not out.isatty() else _show_live
+            await show(view, out)
+    except* MqttConnectError as failed:
+        failure = first_of(failed, MqttConnectError) or failed
+        raise DemoBrokerError(_advice(failure, broker)) from None
+
+
+def _modbus_line(site: Site, where: dict[str, str], gateway_port: int) -> str:
+    """Where the simulated devices are, as the banner says it."""
+    parts = []
+    for bus in site.buses:
+        if bus == SERIAL_BUS:
+            parts.append(f"RS-485 {where[bus]} (RTU 9600 8N1)")
+        else:
+            parts.append(f"Modbus TCP {where[bus]}")
+    if gateway_port:
+        parts.append(f"gateway Modbus TCP {LOOPBACK}:{gateway_port}")
+    return ", ".join(parts)
 
 
 class DemoBrokerError(BridgeError):
@@ -227,13 +303,15 @@ def _advice(failure: Exception, broker: BrokerChoice) -> str:
 
 def demo_config(
     broker: BrokerChoice,
-    modbus_port: int,
+    where: dict[str, str],
     args: argparse.Namespace,
     web_port: int = DEFAULT_WEB_PORT,
+    gateway_port: int = 0,
 ) -> LoadedConfig:
-    """The bridge config of the demo: the five seed devices on one loopback TCP bus, the
-    web page on loopback, and the broker with the login options (validated like a config
-    file's ``mqtt`` section; errors name the options)."""
+    """The bridge config of the demo's site (``args.site``): its buses at ``where`` (bus id
+    -> serial port or loopback host:port), the web page on loopback, the gateway on
+    ``gateway_port`` for a site with an RS-485 line, and the broker with the login options
+    (validated like a config file's ``mqtt`` section; errors name the options)."""
     login = {
         "username": args.username,
         "password_file": args.password_file,
@@ -241,14 +319,15 @@ def demo_config(
     }
     if broker.own:  # anonymous: the login options are for a real broker
         login = {}
+    site = SITES[args.site]
     mqtt: dict[str, Any] = {
         "url": broker.url,
         "version": broker.protocol,
         "base_topic": args.base_topic,
-        "client_id": f"modbus-mqtt-bridge-demo-{modbus_port}",
+        "client_id": f"modbus-mqtt-bridge-demo-{web_port}",
     } | {name: value for name, value in login.items() if value is not None}
     try:
-        return _seeds_config(mqtt, modbus_port, web_port)
+        return _site_config(site, mqtt, where, web_port, gateway_port)
     except ConfigError as exc:
         raise InputError("demo", [_as_option(issue) for issue in exc.issues]) from None
 
@@ -271,25 +350,41 @@ _OPTIONS = {
 }
 
 
-def _seeds_config(mqtt: dict[str, Any], modbus_port: int, web_port: int) -> LoadedConfig:
+def _bus(bus: str, where: str) -> dict[str, Any]:
+    if bus == SERIAL_BUS:
+        return {"id": bus, "transport": "rtu", "port": where, "baudrate": 9600, "timeout": 0.5}
+    host, _, port = where.rpartition(":")
+    return {"id": bus, "transport": "tcp", "host": host, "tcp_port": int(port), "timeout": 0.5}
+
+
+def _site_config(
+    site: Site, mqtt: dict[str, Any], where: dict[str, str], web_port: int, gateway_port: int
+) -> LoadedConfig:
+    data = site_data(site, mqtt, where, web_port, gateway_port)
+    return load_config_data(data, Path(f"demo-{site.name}.yaml"))
+
+
+def site_data(
+    site: Site, mqtt: dict[str, Any], where: dict[str, str], web_port: int, gateway_port: int
+) -> dict[str, Any]:
+    """The config document of ``site``'s bridge (before validation): its buses at
+    ``where``, its devices, the web page and, with an RS-485 line, the gateway."""
+    bridge: dict[str, Any] = {"web": {"enabled": True, "port": web_port}}
+    if site.serial:  # a second master reads the line through the bridge, not beside it
+        units = {d.unit: d.id for d in site.serial}
+        bridge["gateway"] = {"enabled": True, "host": LOOPBACK, "port": gateway_port}
+        bridge["gateway"] |= {"units": units, "max_age": 2.0}
     data: dict[str, Any] = {
         "mqtt": mqtt,
-        "bridge": {"web": {"enabled": True, "port": web_port}},
-        "buses": [
-            {
-                "id": "demo",
-                "transport": "tcp",
-                "host": LOOPBACK,
-                "tcp_port": modbus_port,
-                "timeout": 0.5,
-            }
-        ],
+        "bridge": bridge,
+        "buses": [_bus(bus, where[bus]) for bus in site.buses],
         "devices": [
-            {"id": s.id, "name": s.name, "bus": "demo", "unit": s.unit, "mapping": s.mapping}
-            for s in SEEDS
+            {"id": d.id, "name": d.name, "bus": d.bus, "unit": d.unit, "mapping": d.mapping}
+            | ({"allow_dangerous_writes": True} if d.allow_dangerous else {})
+            for d in site.devices
         ],
     }
-    return load_config_data(data, Path("demo.yaml"))
+    return data
 
 
 @contextlib.asynccontextmanager

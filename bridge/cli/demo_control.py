@@ -24,8 +24,11 @@ from bridge.modbus.simulator import Simulator
 FAULT_REQUEST = "demo/fault"
 
 
-def fault_request(simulator: Simulator, units: dict[str, int]) -> Callable[[bytes], Awaitable[str]]:
-    """The handler of ``demo/fault`` for the devices ``units`` names (device id -> unit)."""
+def fault_request(
+    units: dict[str, tuple[Simulator, int]],
+) -> Callable[[bytes], Awaitable[str]]:
+    """The handler of ``demo/fault`` for the devices ``units`` names (device id -> the
+    simulator serving it and its unit)."""
 
     async def handle(payload: bytes) -> str:
         transaction: Any = None
@@ -39,22 +42,24 @@ def fault_request(simulator: Simulator, units: dict[str, int]) -> Callable[[byte
                 raise ValueRejectedError(f"device: one of {sorted(units)}, not {device!r:.60}")
             fault = data.get("fault")
             counter = data.get("counter")
+            simulator, unit = units[device]
             if counter is not None:
                 if not isinstance(counter, str) or not isinstance(fault, str):
                     raise ValueRejectedError("counter: a counter key, with fault: its fault")
-                simulator.counter_fault(units[device], counter, fault)
+                simulator.counter_fault(unit, counter, fault)
             elif fault is None:
-                simulator.clear_faults(units[device])
+                simulator.clear_faults(unit)
             elif isinstance(fault, str):
                 key, _, label = fault.partition("=")
-                simulator.raise_fault(units[device], key, label or None)
+                simulator.raise_fault(unit, key, label or None)
             else:
                 raise ValueRejectedError("fault: an alarm key (KEY or KEY=LABEL), or null")
         except ValueError as exc:  # JSON and refusals (ValueRejectedError is no ValueError)
             return response(error=f"payload: {exc}", transaction=transaction)
         except (ValueRejectedError, KeyError) as exc:  # KeyError: a key the unit lacks
             return response(error=str(exc).strip('"'), transaction=transaction)
-        faults = simulator.faults(units[device])
+        simulator, unit = units[device]
+        faults = simulator.faults(unit)
         return response({"device": device, "faults": faults}, transaction=transaction)
 
     return handle

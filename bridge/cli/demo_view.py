@@ -38,21 +38,22 @@ class DemoView:
     broker_url: str
     broker_how: str
     modbus: str = ""
+    command: str = "modbus/borehole_pump/start_stop/set"  # the example command's topic
+    command_payload: str = "OFF"
     extra: list[str] = field(default_factory=list)  # more banner lines (the demo's own)
     _said: dict[str, str] = field(default_factory=dict)
 
     def banner(self) -> list[str]:
         base = self.bridge.topics.base
-        first = next(iter(self.bridge.engine.devices), "borehole_pump")
         count = len(self.bridge.engine.devices)
         client = mosquitto_options(self.bridge.mqtt)
         return [
-            f"modbus-mqtt-bridge demo: {count} simulated devices, Modbus TCP {self.modbus}",
+            f"modbus-mqtt-bridge demo: {count} simulated devices, {self.modbus}",
             f"MQTT broker: {self.broker_url} ({self.broker_how})",
             f"web page: {page_url(self.bridge.loaded.config.bridge.web)}",
             f"topics:  {base}/<device> (JSON), {base}/<device>/<key>/set",
             f"watch:   mosquitto_sub{client} -t '{base}/#' -v",
-            f"command: mosquitto_pub{client} -t {base}/{first}/start_stop/set -m OFF",
+            f"command: mosquitto_pub{client} -t {self.command} -m {self.command_payload}",
             *self.extra,
             "Home Assistant: its MQTT integration on this broker shows the devices.",
         ]

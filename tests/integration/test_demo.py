@@ -10,6 +10,7 @@ import asyncio
 import json
 import os
 import pty
+import re
 import shutil
 import signal
 import subprocess
@@ -21,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from bridge.cli.demo import SEEDS
+from bridge.cli.demo_site import SITES
 from bridge.config import MqttConfig
 from bridge.mqtt import MqttClient
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
@@ -86,11 +88,13 @@ def discovered(configs: dict[str, bytes]) -> set[str]:
     return found - {"modbus"}
 
 
-async def discovery_of_every_device(url: str, version: str = "5", **login: str) -> None:
-    """Every seed device's discovery config arrives (bounded)."""
+async def discovery_of_every_device(
+    url: str, version: str = "5", devices: set[str] = DEVICES, **login: str
+) -> None:
+    """Every seed device's (or ``devices``') discovery config arrives (bounded)."""
     found: set[str] = set()
     async with asyncio.timeout(15):
-        while found != DEVICES:
+        while found != devices:
             pattern = "homeassistant/device/+/config"
             found = discovered(await retained(url, pattern, version, **login))
             await asyncio.sleep(0.2)
@@ -368,3 +372,62 @@ async def test_demo_in_a_terminal_shows_the_live_table(mosquitto: Broker) -> Non
             if process.poll() is None:
                 process.kill()
             os.close(main)
+
+
+def taken(value: object, payload: str) -> bool:
+    """A state's value is what a control's payload asked for."""
+    if isinstance(value, bool):
+        return value is (payload == "ON")
+    if isinstance(value, int | float):
+        return float(value) == float(payload)
+    return value == payload
+
+
+@pytest.mark.asyncio
+async def test_the_home_site_runs_on_an_rs485_line_with_the_gateway(mosquitto: Broker) -> None:
+    """``demo --site home``: the meter, hybrid inverter and wallbox on a virtual RS-485
+    line, the heat pump on Modbus TCP, each online and discovered; the printed gateway
+    read (libmodbus' mbpoll, as printed) gets the meter's voltages through the bridge;
+    each of the site's controls sent on MQTT reaches the device's state; the printed
+    fault raises the inverter's alarm; Ctrl-C removes the devices."""
+    site = SITES["home"]
+    ids = {d.id for d in site.devices}
+    with demo("--site", "home", "--mqtt-url", mosquitto.url, "--gateway-port", "0") as process:
+        lines = await read_until(process, "ready:")
+        assert {line.split(":")[0] for line in lines if ": online (" in line} == ids, lines
+        assert any("RS-485 /dev/" in line for line in lines), lines
+        await discovery_of_every_device(mosquitto.url, devices=ids)
+        gateway = next(line for line in lines if line.startswith("gateway: mbpoll"))
+        if shutil.which("mbpoll") is not None:
+            command = gateway.partition(":")[2].partition("#")[0]
+            read = await asyncio.create_subprocess_exec(
+                "bash", "-c", command, stdout=asyncio.subprocess.PIPE
+            )
+            async with asyncio.timeout(10):
+                out, _ = await read.communicate()
+            assert read.returncode == 0, out
+            voltages = [float(v) for v in re.findall(r"^\[\d+\]:\s+(\S+)", out.decode(), re.M)]
+            assert len(voltages) == 3 and all(180 < v < 280 for v in voltages), out
+        config = MqttConfig(url=mosquitto.url)
+        async with MqttClient(config, will_topic="tester/state", client_id="tester") as client:
+            await client.subscribe(*(f"modbus/{d}" for d in ids))
+            for control in site.controls:
+                topic = f"modbus/{control.device}/{control.key}/set"
+                await client.publish(topic, control.payload)
+                async with asyncio.timeout(15):
+                    async for message in client.messages():
+                        document = json.loads(message.payload)
+                        if message.topic == f"modbus/{control.device}" and taken(
+                            document.get(control.key), control.payload
+                        ):
+                            break
+            device, alarm = site.fault
+            body = {"device": device, "fault": alarm}
+            await client.publish("modbus/bridge/request/demo/fault", json.dumps(body))
+            async with asyncio.timeout(15):
+                async for message in client.messages():
+                    document = json.loads(message.payload)
+                    if message.topic == f"modbus/{device}" and alarm in document["alarms"]:
+                        break
+        await stop(process)
+    assert discovered(await retained(mosquitto.url, "homeassistant/device/+/config")) == set()
