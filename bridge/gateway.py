@@ -7,10 +7,14 @@ bridge/core/gateway.py, and what a write's words mean bridge/core/gateway_writes
 - its unit must be in ``bridge.gateway.units`` (else 0x0A); a configured device that is
   offline answers 0x0B at once, without a frame (the poller brings it back);
 - a read goes through the bus scheduler at ``Priority.PROXY`` (after commands and reads
-  on request, before routine polls), split into the device's read limits and joined as
-  ``device/read`` does; with ``max_age`` (the server's, or the device's
-  ``gateway_max_age``) a read whose words the bridge read or wrote within that age is
-  answered from its image without a frame. What a proxied read returns goes into the
+  on request; against the bridge's due polls the fair share decides, bridge/core/
+  fair_share.py, so masters never starve the polls of a slow device), split into the
+  device's read limits and joined as ``device/read`` does; a read still waiting for the
+  bus after ``max_wait`` (twice the bus timeout by default) answers 0x06 (busy) rather
+  than making its master wait on (0x0B when its unit rests after not answering);
+  with ``max_age`` (the server's, or the device's ``gateway_max_age``) a read whose
+  words the bridge read or wrote within that age is answered from its image without a
+  frame. What a proxied read returns goes into the
   device's image too.
 - a write needs ``allow_writes`` (else 0x01) and a configured device. The words are turned
   into the values of the entities they write (every word of each entity, else 0x03) and
@@ -38,7 +42,7 @@ import contextlib
 import logging
 import time
 from collections import Counter
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 from bridge.config import GatewayConfig, LoadedConfig, TcpBus
@@ -61,13 +65,13 @@ from bridge.core.management_request import RequestError
 from bridge.core.reach import check_raw_read, check_raw_write
 from bridge.core.request import Read, Write
 from bridge.dispatcher import Dispatcher
-from bridge.errors import BridgeError, ValueRejectedError
+from bridge.errors import BridgeError, CommandExpiredError, ValueRejectedError
 from bridge.management import reach_at
-from bridge.modbus.commission import Submit, read_in_parts, scheduler_submit
+from bridge.modbus.commission import Submit, read_in_parts
 from bridge.modbus.engine import Engine
 from bridge.modbus.gateway_server import GatewayServer, Limits
 from bridge.modbus.poller import DevicePoller
-from bridge.modbus.scheduler import Priority
+from bridge.modbus.scheduler import BusScheduler, Priority
 
 log = logging.getLogger(__name__)
 Cell = tuple[Table, int]
@@ -132,6 +136,9 @@ class Gateway:
             client.refused += 1
             self._refused(request, rejected)
             return code_for(rejected)
+        except CommandExpiredError as expired:  # waited past the bus timeout, never sent
+            client.busy += 1
+            return code_for(expired)
         except BridgeError as error:
             client.failed += 1
             return code_for(error)
@@ -154,10 +161,16 @@ class Gateway:
     async def _read(self, client: ClientCounters, route: Route, read: Read) -> tuple[int, ...]:
         poller = self._device(route)
         scheduler = self.engine.schedulers[route.bus]
+        bus_timeout = scheduler.transport.bus.timeout
+        wait = self.settings.max_wait or 2 * bus_timeout  # then 0x06, not a longer wait
+
+        def delayed() -> None:
+            client.delayed += 1
+
         if poller is None:
             limit = MAX_READ_BITS if read.table.is_bits else MAX_READ_REGISTERS
-            submit = scheduler_submit(scheduler, Priority.PROXY)
-            timeout = scheduler.transport.bus.timeout
+            submit = _bus_submit(scheduler, wait, delayed)
+            timeout = bus_timeout
         else:
             state = poller.state
             max_age = poller.device.gateway_max_age
@@ -167,7 +180,7 @@ class Gateway:
                 client.cached += 1
                 return cached
             limit = state.limits().max_count(read.table)
-            submit = _device_submit(poller)
+            submit = _device_submit(poller, wait, delayed)
             timeout = poller.link.timeout
         async with self._slot(route.bus):
             values, requests, _ = await read_in_parts(submit, route.unit, read, timeout, limit)
@@ -304,13 +317,33 @@ def routes_of(loaded: LoadedConfig) -> dict[int, Route]:
     return routes
 
 
-def _device_submit(poller: DevicePoller) -> Submit:
-    """Reads through the device's link (its unlock, its health), after commands."""
+def _bus_submit(scheduler: BusScheduler, wait: float, delayed: Callable[[], None]) -> Submit:
+    """Reads of a unit no configured device answers, straight through the bus scheduler;
+    each part sent within ``wait`` seconds, or ended unsent (0x06)."""
+
+    async def submit(unit: int, request: Read | Write, timeout: float) -> tuple[int, ...]:
+        return await scheduler.submit(
+            unit,
+            request,
+            timeout=timeout,
+            priority=Priority.PROXY,
+            deadline=time.monotonic() + wait,
+            yielded=delayed,
+        )
+
+    return submit
+
+
+def _device_submit(poller: DevicePoller, wait: float, delayed: Callable[[], None]) -> Submit:
+    """Reads through the device's link (its unlock, its health), after commands; each
+    part sent within ``wait`` seconds, or ended unsent (0x06)."""
 
     async def submit(unit: int, request: Read | Write, timeout: float) -> tuple[int, ...]:
         del unit, timeout  # the device's own
         if poller.health.online is False:
             raise GatewayRefusalError(Code.TARGET_NO_RESPONSE, f"{poller.device.id} is offline")
-        return await poller.link.submit(request, Priority.PROXY)
+        if not isinstance(request, Read):
+            raise TypeError("a gateway read")
+        return await poller.link.proxy(request, time.monotonic() + wait, delayed)
 
     return submit

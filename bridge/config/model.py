@@ -199,6 +199,13 @@ class DeviceConfig(Strict):
         description="this device's bridge.gateway.max_age: answer a read from the bridge's "
         "own image when all of it is younger than this (0: always read the bus)",
     )
+    gateway_poll_share: float | None = Field(
+        None,
+        ge=0,
+        le=1,
+        description="this device's bridge.gateway.poll_share: its due polls' part of its "
+        "request slots that masters' requests contend for",
+    )
 
     @field_validator("id")
     @classmethod
@@ -342,6 +349,21 @@ class GatewayConfig(Strict):
     )
     max_queued_per_bus: int = Field(
         8, ge=1, le=64, description="gateway requests waiting per bus; more answer 0x06"
+    )
+    poll_share: float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="the bridge's own due polls' part of a device's (and a bus's) request "
+        "slots that masters' requests contend for (0: the masters always first; 1: the "
+        "polls first); commands go first whatever it is",
+    )
+    max_wait: Duration | None = Field(
+        None,
+        gt=0,
+        description="seconds a master's request may wait for the bus before it answers "
+        "0x06 (busy) instead (default: twice the bus timeout: a transaction in flight may "
+        "take one, the silence after a timeout another)",
     )
     idle_timeout: Duration = Field(
         120.0, gt=0, description="close a connection silent this long (or a half frame)"

@@ -201,6 +201,8 @@ class ClientCounters:
     refused: int = 0  # answered with an exception the gateway chose (guard, limits, busy)
     failed: int = 0  # the device's exception, silence or a bus fault
     queued: int = 0  # waiting or on the bus now
+    delayed: int = 0  # slots its requests gave to the bridge's polls (the fair share)
+    busy: int = 0  # answered 0x06: still waiting for the bus after its timeout
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -213,6 +215,8 @@ class ClientCounters:
             "refused": self.refused,
             "failed": self.failed,
             "queued": self.queued,
+            "delayed": self.delayed,
+            "busy": self.busy,
         }
 
 

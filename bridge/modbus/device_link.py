@@ -139,6 +139,18 @@ class DeviceLink:
             self._locked_out,
         )
 
+    async def proxy(
+        self, request: Read, deadline: float, yielded: Callable[[], None] | None = None
+    ) -> tuple[int, ...]:
+        """Another master's read through the gateway: after commands, its slot contested
+        with the bridge's polls (the fair share: ``yielded`` is told each slot it gave
+        up), ended unsent with CommandExpiredError if still waiting at ``deadline``."""
+        return await self.unlocker.submit(
+            lambda: self._submit(request, Priority.PROXY, None, deadline, yielded),
+            lambda write: self._submit(write, Priority.WRITE, self.retries, None),
+            self._locked_out,
+        )
+
     def _locked_out(self, reason: str) -> None:
         """The device stays locked: in error with the reason (logged once), offline."""
         if self.health.fault is not Fault.LOCKED:
@@ -151,6 +163,7 @@ class DeviceLink:
         priority: Priority,
         retries: int | None,
         deadline: float | None,
+        yielded: Callable[[], None] | None = None,
     ) -> tuple[int, ...]:
         if retries is None:  # reads are not resent: the next cycle reads again
             retries = 0
@@ -165,6 +178,7 @@ class DeviceLink:
                 protocol=self.state.protocol,
                 deadline=deadline,
                 answered=answer.append,
+                yielded=yielded,
             )
         except DeviceTimeoutError:
             self._record(Outcome.TIMEOUT)

@@ -70,6 +70,7 @@ class Engine:
         self.devices: dict[str, DevicePoller] = {}
         for bus in config.buses:
             self.schedulers[bus.id] = bus_scheduler(bus)
+            self.schedulers[bus.id].fair.share = config.bridge.gateway.poll_share
         self._buses = {bus.id: bus for bus in config.buses}
         self._on_update = on_update
         self._policy = policy
@@ -85,6 +86,11 @@ class Engine:
         self, device: DeviceConfig, mapping: Mapping, guard: Guard = UNGUARDED
     ) -> DevicePoller:
         bus = self._buses[device.bus]
+        shares = self.schedulers[bus.id].fair.shares
+        if device.gateway_poll_share is None:
+            shares.pop(device.unit, None)
+        else:
+            shares[device.unit] = device.gateway_poll_share
         return DevicePoller(
             device,
             mapping,

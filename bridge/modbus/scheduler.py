@@ -3,8 +3,12 @@
 Devices submit jobs and await them. The scheduler runs the most urgent job whose unit
 may be addressed now (``min_interval`` per unit, e.g. the Smartgen's 1 s between
 requests): a command waits at most for the one transaction in flight, and a unit that
-must rest does not hold up the others. Between two frames the bus stays silent for at
-least 3.5 characters at its baud rate. A lost port or gateway is reopened with backoff
+must rest does not hold up the others. Where another master's request (``PROXY``) and a
+due poll could take the same slot, the bridge's fair share decides (bridge/core/
+fair_share.py), so masters never starve the polls of a slow device. A job still waiting
+at its deadline is ended then (a command's expiry; a master's request answered 0x06
+instead of waiting on), not when its unit would be free. Between two frames the bus stays
+silent for at least 3.5 characters at its baud rate. A lost port or gateway is reopened with backoff
 while jobs wait (after each connect, the bus stays silent ``connect_delay`` seconds); every
 job still ends in its own deadline's error, never hangs.
 
@@ -46,6 +50,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from bridge.core.commands import past_deadline
+from bridge.core.fair_share import BUS, FairShare
 from bridge.core.health import exception_meaning
 from bridge.core.protocol import Protocol
 from bridge.core.request import Read, Write, WriteSequence
@@ -91,6 +96,7 @@ class _Job:
     deadline: float | None = None
     sent: bool = False  # a frame of it went out (a resend after the deadline is dropped)
     answered: Callable[[float], None] | None = None  # told each frame's answer time
+    yielded: Callable[[], None] | None = None  # told when a poll took its slot (fair share)
 
 
 _Entry = tuple[int, int, _Job]  # (priority, sequence, job): the heap's order
@@ -118,8 +124,10 @@ class BusScheduler:
         *,
         late_replies: bool = False,
         connect_delay: float = 0.0,
+        fair: FairShare | None = None,
     ) -> None:
         self.transport = transport
+        self.fair = fair or FairShare()  # the polls' share against other masters
         self.gap = gap
         self.late_replies = late_replies  # True: replies carry no transaction id
         self.connect_delay = connect_delay  # silence after each (re)connect
@@ -152,6 +160,7 @@ class BusScheduler:
         protocol: Protocol | None = None,
         deadline: float | None = None,
         answered: Callable[[float], None] | None = None,
+        yielded: Callable[[], None] | None = None,
     ) -> tuple[int, ...]:
         """Queue one transaction and wait for its result (or its error).
 
@@ -161,7 +170,8 @@ class BusScheduler:
         with CommandExpiredError and is never sent. A sequence that fails after its first
         frame raises PartialWriteError. ``answered`` is told the seconds of each frame from
         its sending to its answer (the device's own time: not the wait in the queue, the
-        gap or the unit's pacing).
+        gap or the unit's pacing); ``yielded`` is told each time a poll takes the slot it
+        contested (a ``PROXY`` job: the fair share).
         """
         future: asyncio.Future[tuple[int, ...]] = asyncio.get_running_loop().create_future()
         job = _Job(
@@ -175,6 +185,7 @@ class BusScheduler:
             future,
             deadline,
             answered=answered,
+            yielded=yielded,
         )
         self._push(job)
         return await future
@@ -225,25 +236,74 @@ class BusScheduler:
 
     def _take_ready(self, start: float) -> tuple[_Job | None, float | None]:
         """Take the most urgent job that may go at ``start`` off the heap (jobs whose
-        submitter gave up are dropped; jobs of units that must still wait stay); else
-        None and when the first waiting unit is free."""
-        waiting: list[_Entry] = []
+        submitter gave up are dropped, jobs past their deadline ended; jobs of units that
+        must still wait stay); else None and when the first waiting unit is free or the
+        first waiting deadline passes. A ``PROXY`` job contests its slot with a ready poll
+        (of its unit, else of the bus): the fair share decides which goes."""
+        now = time.monotonic()
+        kept: list[_Entry] = []
         chosen: _Job | None = None
+        same: _Entry | None = None  # the most urgent ready poll of the chosen proxy's unit
+        other: _Entry | None = None  # ... of any other unit
         earliest: float | None = None
         while self._queue:
             entry = heapq.heappop(self._queue)
             job = entry[2]
-            if job.future.done():
+            if self._ended(job, now):
                 continue
             when = self._unit_ready(job, start)
-            if when <= start:
+            if when > start:
+                kept.append(entry)
+                if job.deadline is not None and not job.sent:
+                    when = min(when, job.deadline)
+                earliest = when if earliest is None else min(earliest, when)
+            elif chosen is None:
                 chosen = job
-                break
-            waiting.append(entry)
-            earliest = when if earliest is None else min(earliest, when)
-        for entry in waiting:
+                if job.priority != Priority.PROXY:
+                    break
+            elif job.priority == Priority.POLL and job.unit == chosen.unit and same is None:
+                same = entry
+                break  # nothing after it can change the contest
+            elif job.priority == Priority.POLL and other is None:
+                other = entry
+            else:
+                kept.append(entry)
+        if chosen is not None and chosen.priority == Priority.PROXY:
+            chosen, left = self._contest(chosen, same, other, final=start <= now)
+            kept += left
+        for entry in kept:
             heapq.heappush(self._queue, entry)
         return chosen, earliest
+
+    def _ended(self, job: _Job, now: float) -> bool:
+        """The job is over before it was sent: its submitter gave up, or its deadline
+        passed while it waited (a master's request for a unit resting after a timeout
+        ends as that timeout: the device did not answer, the bus was not merely busy)."""
+        if job.future.done():
+            return True
+        if job.deadline is None or job.sent or not past_deadline(job.deadline, now):
+            return False
+        if job.priority == Priority.PROXY and self._resting.get(job.unit, 0.0) > now:
+            _settle(job, DeviceTimeoutError(f"unit {job.unit} did not answer its last request"))
+        else:
+            _settle(job, _expired(job))
+        return True
+
+    def _contest(
+        self, proxy: _Job, same: _Entry | None, other: _Entry | None, *, final: bool
+    ) -> tuple[_Job, list[_Entry]]:
+        """The job that takes the slot a master's request contests with a ready poll (of
+        its unit, else of the bus), and the entries that go back to the queue. A choice
+        made before the bus's silence is made again after it: only a ``final`` one counts
+        in the fair share."""
+        contest, key = (same, proxy.unit) if same is not None else (other, BUS)
+        back = [entry for entry in (same, other) if entry is not None]
+        if contest is None or not (self.fair.decide(key) if final else self.fair.poll_turn(key)):
+            return proxy, back
+        if final and proxy.yielded is not None:
+            proxy.yielded()
+        back.remove(contest)
+        return contest[2], [*back, (proxy.priority, proxy.sequence, proxy)]
 
     def _silent_from(self) -> float:
         """When the bus may carry the next frame: after the gap, after a timeout's quiet,

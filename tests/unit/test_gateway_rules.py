@@ -153,6 +153,8 @@ def test_clients_are_counted_by_address_and_the_oldest_idle_forgotten() -> None:
         "refused": 1,
         "failed": 0,
         "queued": 0,
+        "delayed": 0,
+        "busy": 0,
     }
     everyone_busy = ClientBook(kept=1)
     everyone_busy.of("a").queued = 1

@@ -163,7 +163,8 @@ function renderGateway(gateway) {
     clients.map(([peer, c]) => row(
       [el("th", peer), el("td", c.connections, "num"), el("td", c.requests, "num"),
        el("td", c.served, "num"), el("td", c.cached, "num"), el("td", c.queued, "num"),
-       el("td", c.refused, "num"), el("td", c.failed, "num"), el("td", c.dropped, "num")],
+       el("td", c.refused, "num"), el("td", c.failed, "num"), el("td", c.dropped, "num"),
+       el("td", c.delayed, "num"), el("td", c.busy, "num")],
       { "data-client": peer },
     )), "data-client");
 }
