@@ -46,12 +46,14 @@ ABBREVIATIONS = frozenset(
         "IGBT",
         "LED",
         "MAC",
+        "MOSFET",
         "MPPT",  # maximum power point tracking
         "MTU",  # the engine maker
         "NTC",
         "PCB",
         "PID",
         "PLC",
+        "PLL",  # phase-locked loop (grid synchronisation)
         "PTC",
         "PWM",
         "RMS",

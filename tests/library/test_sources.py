@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "victron_gx_system",
+        "marstek_venus_e",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -137,6 +138,15 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "battery_soc",
             "pv_dc_power",
         )
+    ),
+    "marstek_venus_e": frozenset(
+        {
+            "ac_frequency type",
+            "ac_offgrid_current type",
+            "energy_discharge type",
+            "max_cell_voltage type",
+            "min_cell_voltage type",
+        }
     ),
 }
 

@@ -19,11 +19,12 @@ from tests.library.sources import (
     chint,
     eastron,
     eastron_sdm_modbus,
+    marstek,
     orno,
     victron,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, victron)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, victron, marstek)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
