@@ -38,18 +38,22 @@ ABBREVIATIONS = frozenset(
         "CPU",
         "CRC",
         "DOL",  # direct on line (a motor started without a drive)
+        "DVCC",  # distributed voltage and current control (Victron)
         "ECU",  # engine control unit
         "EEPROM",
+        "ESS",  # energy storage system (Victron's grid-interactive battery control)
         "FOC",  # field-oriented control
         "IGBT",
         "LED",
         "MAC",
+        "MOSFET",
         "MPPT",  # maximum power point tracking
         "MTU",  # the engine maker
         "NTC",
         "PCB",
         "PID",
         "PLC",
+        "PLL",  # phase-locked loop (grid synchronisation)
         "PTC",
         "PWM",
         "RMS",

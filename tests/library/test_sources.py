@@ -33,6 +33,8 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "victron_gx_system",
+        "marstek_venus_e",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -118,6 +120,33 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
+    ),
+    # evcc reads the GX with function 4, the others with 3 (the GX answers both alike)
+    "victron_gx_system": frozenset(
+        f"{key} table"
+        for key in (
+            "pv_ac_output_power_l1",
+            "pv_ac_output_power_l2",
+            "pv_ac_output_power_l3",
+            "pv_ac_input_power_l1",
+            "pv_ac_input_power_l2",
+            "pv_ac_input_power_l3",
+            "grid_power_l1",
+            "grid_power_l2",
+            "grid_power_l3",
+            "battery_power",
+            "battery_soc",
+            "pv_dc_power",
+        )
+    ),
+    "marstek_venus_e": frozenset(
+        {
+            "ac_frequency type",
+            "ac_offgrid_current type",
+            "energy_discharge type",
+            "max_cell_voltage type",
+            "min_cell_voltage type",
+        }
     ),
 }
 
