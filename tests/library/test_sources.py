@@ -33,6 +33,7 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "sungrow_sh_rt",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -118,6 +119,14 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
+    ),
+    "sungrow_sh_rt": frozenset(
+        {
+            "total_output_energy scale",
+            "reactive_power scale",
+            "power_factor scale",
+            "battery_soc type",
+        }
     ),
 }
 
