@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "sungrow_sh_rt",
+        "sungrow_sg_rt",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -126,6 +127,17 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "reactive_power scale",
             "power_factor scale",
             "battery_soc type",
+        }
+    ),
+    # 0x138f: input 5007 (temperature) and holding 5007 (power limitation ratio), two tables
+    # at one wire address, which the "key" comparison does not tell apart
+    "sungrow_sg_rt": frozenset(
+        {
+            "active_power type",
+            "current_l1 type",
+            "current_l2 type",
+            "current_l3 type",
+            "0x138f key",
         }
     ),
 }

@@ -12,7 +12,7 @@ negation named in its notes (scales here are positive).
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition, SourcePoint
-from tests.library.sources.upstream import EVCC, OPENWB
+from tests.library.sources.upstream import EVCC, OPENEMS_CONVENTION, OPENWB
 
 MKAISER = (
     "mkaiser/Sungrow-SHx-Inverter-Modbus-Home-Assistant@63beec6770e8275670cdf01437cb305817f32988"
@@ -269,4 +269,144 @@ SH_RT = (
     ),
 )
 
-DEFINITIONS = {"sungrow_sh_rt": SH_RT}
+# SunGather/registers-sungrow.yaml: the rows whose models list names the SG-RT (or that have
+# none), document number - 1
+SUNGATHER_SG = (
+    _in("nominal_power", 5000, "u16", "kW", 0.1, "nominal_active_power"),
+    _in("daily_energy", 5002, "u16", "kWh", 0.1, "daily_power_yields"),
+    _in("total_energy_coarse", 5003, "u32", "kWh", 1, "total_power_yields"),
+    _in("total_running_time", 5005, "u32", "h", 1, "total_running_time"),
+    _in("inverter_temperature", 5007, "s16", "°C", 0.1, "internal_temperature"),
+    _in("apparent_power", 5008, "u32", "VA", 1, "total_apparent_power"),
+    _in("mppt1_voltage", 5010, "u16", "V", 0.1, "mppt_1_voltage"),
+    _in("mppt1_current", 5011, "u16", "A", 0.1, "mppt_1_current"),
+    _in("mppt2_voltage", 5012, "u16", "V", 0.1, "mppt_2_voltage"),
+    _in("mppt2_current", 5013, "u16", "A", 0.1, "mppt_2_current"),
+    _in("dc_power", 5016, "u32", "W", 1, "total_dc_power"),
+    _in("voltage_l1", 5018, "u16", "V", 0.1, "phase_a_voltage"),
+    _in("voltage_l2", 5019, "u16", "V", 0.1, "phase_b_voltage"),
+    _in("voltage_l3", 5020, "u16", "V", 0.1, "phase_c_voltage"),
+    _in("current_l1", 5021, "s16", "A", 0.1, "phase_a_current"),
+    _in("current_l2", 5022, "s16", "A", 0.1, "phase_b_current"),
+    _in("current_l3", 5023, "s16", "A", 0.1, "phase_c_current"),
+    _in("active_power", 5030, "u32", "W", 1, "total_active_power"),
+    _in("reactive_power", 5032, "s32", "var", 1, "total_reactive_power"),
+    _in("power_factor", 5034, "s16", "", 0.001, "power_factor"),
+    _in("grid_frequency_coarse", 5035, "u16", "Hz", 0.1, "grid_frequency"),
+    _in("total_energy", 5143, "u32", "kWh", 0.1, "total_power_yields"),
+    _in("grid_frequency", 5147, "u16", "Hz", 0.01, "grid_frequency"),
+    _hold("power_limitation_setting", 5007, "u16", "%", 0.1, "power_limitation_setting"),
+    _hold("power_limitation_adjustment", 5038, "u16", "kW", 0.1, "power_limitation_adjustment"),
+)
+
+# templates/definition/meter/sungrow-inverter.yaml (grid and pv usages)
+EVCC_SG = (
+    _in("total_energy_coarse", 5003, "u32", "kWh", 1, "Total power yields"),
+    _in("active_power", 5030, "u32", "W", 1, "Total Active Power"),
+    _in("meter_power", 5082, "s32", "W", 1, "Meter power"),
+    _in("total_import", 5098, "u32", "kWh", 0.1, "Total import energy"),
+)
+
+# sungrow_sg/{inverter,counter}.py
+OPENWB_SG = (
+    _in("dc_power", 5016, "u32", "W", 1, "dc_power"),
+    _in("voltage_l1", 5018, "u16", "V", 0.1, "voltages[0]"),
+    _in("voltage_l2", 5019, "u16", "V", 0.1, "voltages[1]"),
+    _in("voltage_l3", 5020, "u16", "V", 0.1, "voltages[2]"),
+    _in("current_l1", 5021, "s16", "A", 0.1, "currents[0]"),
+    _in("current_l2", 5022, "s16", "A", 0.1, "currents[1]"),
+    _in("current_l3", 5023, "s16", "A", 0.1, "currents[2]"),
+    _in("active_power", 5030, "s32", "W", 1, "inverter power"),
+    _in("power_factor", 5034, "s16", "", 0.001, "power_factor"),
+    _in("grid_frequency_coarse", 5035, "u16", "Hz", 0.1, "frequency"),
+    _in("meter_power", 5082, "s32", "W", 1, "counter power"),
+    _in("meter_power_l1", 5084, "s32", "W", 1, "powers[0]"),
+    _in("meter_power_l2", 5086, "s32", "W", 1, "powers[1]"),
+    _in("meter_power_l3", 5088, "s32", "W", 1, "powers[2]"),
+)
+
+# io.openems.edge.sungrow pvinverter/PvInverterSungrowImpl.java; its mV, mA and Wh channels
+# (x100 of the 0.1 V, 0.1 A and 0.1 kWh registers) transcribed in V, A and kWh
+OPENEMS_SG = (
+    _in("nominal_power", 5000, "u16", "W", 100, "NOMINAL_OUTPUT_POWER"),
+    _in("daily_energy", 5002, "u16", "kWh", 0.1, "DAILY_ENERGY"),
+    _in("total_running_time", 5005, "u32", "h", 1, "TOTAL_RUNNING_TIME"),
+    _in("inverter_temperature", 5007, "s16", "°C", 0.1, "INTERNAL_TEMPERATURE"),
+    _in("apparent_power", 5008, "u32", "VA", 1, "APPARENT_POWER"),
+    _in("mppt1_voltage", 5010, "u16", "V", 0.1, "DC_VOLTAGE_1"),
+    _in("mppt1_current", 5011, "u16", "A", 0.1, "DC_CURRENT_1"),
+    _in("mppt2_voltage", 5012, "u16", "V", 0.1, "DC_VOLTAGE_2"),
+    _in("mppt2_current", 5013, "u16", "A", 0.1, "DC_CURRENT_2"),
+    _in("dc_power", 5016, "u32", "W", 1, "DC_POWER"),
+    _in("voltage_l1", 5018, "u16", "V", 0.1, "VOLTAGE_L1"),
+    _in("voltage_l2", 5019, "u16", "V", 0.1, "VOLTAGE_L2"),
+    _in("voltage_l3", 5020, "u16", "V", 0.1, "VOLTAGE_L3"),
+    _in("current_l1", 5021, "u16", "A", 0.1, "CURRENT_L1"),
+    _in("current_l2", 5022, "u16", "A", 0.1, "CURRENT_L2"),
+    _in("current_l3", 5023, "u16", "A", 0.1, "CURRENT_L3"),
+    _in("active_power", 5030, "u32", "W", 1, "ACTIVE_POWER"),
+    _in("reactive_power", 5032, "s32", "var", 1, "REACTIVE_POWER"),
+    _in("power_factor", 5034, "s16", "", 0.001, "POWER_FACTOR"),
+    _hold("power_limitation_setting", 5007, "u16", "%", 0.1, "POWER_LIMITATION_SETTING"),
+    _hold("power_limitation_adjustment", 5038, "u16", "W", 100, "ACTIVE_POWER_LIMIT"),
+)
+
+SG_RT = (
+    SourceDefinition(
+        device="sungrow_sg_rt",
+        source="community:bohdan-s/SunGather",
+        ref=f"{SUNGATHER}:SunGather/registers-sungrow.yaml",
+        points=SUNGATHER_SG,
+        notes=(
+            SUNGATHER_READS,
+            "phase currents S16: its comment says the document prints unsigned, the inverter "
+            "answers signed",
+            "work state 1 (5038) codes 0x0 run .. 0x2500 communication fault; alarm code 1 "
+            "(5045, also given to the alarm time's second by mistake); work state 2 (5081)",
+            "meter, load, import and export rows (5083..5104) listed for the SG-KTL-M and -D "
+            "models only, not the SG-RT",
+            "holding: start/stop 5006 (0xCF/0xCE), power limitation switch 5007 and export "
+            "limitation 5010 (0xAA enable, 0x55 disable), export limitation value 5011 "
+            "without a unit",
+        ),
+    ),
+    SourceDefinition(
+        device="sungrow_sg_rt",
+        source="evcc",
+        ref=f"{EVCC}:templates/definition/meter/sungrow-inverter.yaml",
+        points=EVCC_SG,
+        notes=(
+            "uint32s/int32s: 32-bit, low word first",
+            "grid power is the meter power (5082) as read: + importing",
+        ),
+    ),
+    SourceDefinition(
+        device="sungrow_sg_rt",
+        source="openwb",
+        ref=f"{OPENWB}:{OPENWB_SUNGROW}/sungrow_sg",
+        points=OPENWB_SG,
+        notes=(
+            "Endian.Little word order for 32-bit values",
+            "negates the inverter power (5030, read signed), DC power and phase currents for "
+            "its own signs; reads the meter power (5082) as it is",
+        ),
+    ),
+    SourceDefinition(
+        device="sungrow_sg_rt",
+        source="openems",
+        ref="OpenEMS/openems@519c1f07dde0806f9fdfd0c3691f6b15e65fa381:io.openems.edge.sungrow/"
+        "src/io/openems/edge/sungrow/pvinverter/PvInverterSungrowImpl.java",
+        points=OPENEMS_SG,
+        notes=(
+            OPENEMS_CONVENTION,
+            "LSWMSW (low word first) for every 32-bit value",
+            "reads the phase currents unsigned",
+            "frequency 5147 x 10 into mHz (0.01 Hz on the wire; mHz has no unit in this "
+            "harness, not listed)",
+            "power limitation switch (holding 5006): reads 0xAA as on, writes 0xEE for off",
+            "active power limit: holding 5038 x 100 W, written with function 6",
+        ),
+    ),
+)
+
+DEFINITIONS = {"sungrow_sh_rt": SH_RT, "sungrow_sg_rt": SG_RT}
