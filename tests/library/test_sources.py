@@ -127,6 +127,8 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "reactive_power scale",
             "power_factor scale",
             "battery_soc type",
+            "nominal_power scale",
+            "grid_frequency_coarse scale",
         }
     ),
     # 0x138f: input 5007 (temperature) and holding 5007 (power limitation ratio), two tables

@@ -204,6 +204,57 @@ OPENWB_SH = (
     _in("active_power", 13033, "s32", "W", 1, "inverter power"),
 )
 
+# io.openems.edge.sungrow ess/EssSungrowImpl.java; its mV, mA, Wh and mHz channels (x100 or
+# x10 of the registers) transcribed in V, A, kWh and Hz
+OPENEMS_SH = (
+    _in("nominal_power", 5000, "u16", "VA", 100, "MAX_APPARENT_POWER"),
+    _in("daily_output_energy", 5002, "u16", "kWh", 0.1, "DAILY_OUTPUT_ENERGY"),
+    _in("inverter_temperature", 5007, "s16", "°C", 0.1, "INSIDE_TEMPERATURE"),
+    _in("mppt1_voltage", 5010, "u16", "V", 0.1, "MPPT1_VOLTAGE"),
+    _in("mppt1_current", 5011, "u16", "A", 0.1, "MPPT1_CURRENT"),
+    _in("mppt2_voltage", 5012, "u16", "V", 0.1, "MPPT2_VOLTAGE"),
+    _in("mppt2_current", 5013, "u16", "A", 0.1, "MPPT2_CURRENT"),
+    _in("dc_power", 5016, "u32", "W", 1, "TOTAL_DC_POWER"),
+    _in("voltage_l1", 5018, "u16", "V", 0.1, "VOLTAGE_L1"),
+    _in("voltage_l2", 5019, "u16", "V", 0.1, "VOLTAGE_L2"),
+    _in("voltage_l3", 5020, "u16", "V", 0.1, "VOLTAGE_L3"),
+    _in("reactive_power", 5032, "s32", "var", 1, "REACTIVE_POWER"),
+    _in("power_factor", 5034, "s16", "", 0.001, "POWER_FACTOR"),
+    _in("grid_frequency_coarse", 5035, "u16", "Hz", 0.01, "GRID_FREQUENCY"),
+    _in("export_power_limit_min", 5621, "u16", "W", 10, "EXPORT_LIMIT_MIN"),
+    _in("export_power_limit_max", 5622, "u16", "W", 10, "EXPORT_LIMIT_MAX"),
+    _in("bdc_rated_power", 5627, "u16", "W", 100, "BDC_RATED_POWER"),
+    _in("bms_max_charge_current", 5634, "u16", "A", 1, "CHARGE_MAX_CURRENT"),
+    _in("bms_max_discharge_current", 5635, "u16", "A", 1, "DISCHARGE_MAX_CURRENT"),
+    _in("daily_pv_energy", 13001, "u16", "kWh", 0.1, "DAILY_PV_GENERATION"),
+    _in("total_pv_energy", 13002, "u32", "kWh", 0.1, "TOTAL_PV_GENERATION"),
+    _in("total_pv_export", 13005, "u32", "kWh", 0.1, "TOTAL_EXPORT_ENERGY_FROM_PV"),
+    _in("load_power", 13007, "s32", "W", 1, "LOAD_POWER"),
+    _in("export_power", 13009, "s32", "W", 1, "EXPORT_POWER"),
+    _in("daily_battery_charge_pv", 13011, "u16", "kWh", 0.1, "DAILY_BATTERY_CHARGE_ENERGY_FROM_PV"),
+    _in("total_battery_charge_pv", 13012, "u32", "kWh", 0.1, "TOTAL_BATTERY_CHARGE_ENERGY_FROM_PV"),
+    _in("daily_direct_consumption", 13016, "u16", "kWh", 0.1, "DAILY_DIRECT_ENERGY_CONSUMPTION"),
+    _in("total_direct_consumption", 13017, "u32", "kWh", 0.1, "TOTAL_DIRECT_ENERGY_CONSUMPTION"),
+    _in("battery_voltage", 13019, "u16", "V", 0.1, "BATTERY_VOLTAGE"),
+    _in("battery_soc", 13022, "u16", "%", 0.1, "SOC"),
+    _in("battery_soh", 13023, "u16", "%", 0.1, "SOH"),
+    _in("battery_temperature", 13024, "s16", "°C", 0.1, "BATTERY_TEMPERATURE"),
+    _in("daily_battery_discharge", 13025, "u16", "kWh", 0.1, "DAILY_BATTERY_DISCHARGE_ENERGY"),
+    _in("current_l1", 13030, "s16", "A", 0.1, "CURRENT_L1"),
+    _in("current_l2", 13031, "s16", "A", 0.1, "CURRENT_L2"),
+    _in("current_l3", 13032, "s16", "A", 0.1, "CURRENT_L3"),
+    _in("active_power", 13033, "s32", "W", 1, "ACTIVE_POWER"),
+    _in("daily_import", 13035, "u16", "kWh", 0.1, "DAILY_IMPORT_ENERGY"),
+    _in("total_import", 13036, "u32", "kWh", 0.1, "TOTAL_IMPORT_ENERGY"),
+    _in("daily_battery_charge", 13039, "u16", "kWh", 0.1, "DAILY_CHARGE_ENERGY"),
+    _in("daily_export", 13044, "u16", "kWh", 0.1, "DAILY_EXPORT_ENERGY"),
+    _in("total_export", 13045, "u32", "kWh", 0.1, "TOTAL_EXPORT_ENERGY"),
+    _hold("charge_discharge_power", 13051, "u16", "W", 1, "CHARGE_DISCHARGE_POWER"),
+    _hold("max_soc", 13057, "u16", "%", 0.1, "MAX_SOC"),
+    _hold("min_soc", 13058, "u16", "%", 0.1, "MIN_SOC"),
+    _hold("backup_reserved_soc", 13099, "u16", "%", 1, "RESERVED_SOC_FOR_BACKUP"),
+)
+
 SH_RT = (
     SourceDefinition(
         device="sungrow_sh_rt",
@@ -409,4 +460,24 @@ SG_RT = (
     ),
 )
 
-DEFINITIONS = {"sungrow_sh_rt": SH_RT, "sungrow_sg_rt": SG_RT}
+SH_RT_OPENEMS = SourceDefinition(
+    device="sungrow_sh_rt",
+    source="openems",
+    ref="OpenEMS/openems@18fa9894badd72dea3ff7811b793ed89cda9e794:io.openems.edge.sungrow/"
+    "src/io/openems/edge/sungrow/ess/EssSungrowImpl.java",
+    points=OPENEMS_SH,
+    notes=(
+        OPENEMS_CONVENTION,
+        "LSWMSW (low word first) for every 32-bit value",
+        "takes the nominal output power (5000 x 100) as its maximum apparent power (VA)",
+        "grid frequency: 5035 x 10 into mHz, so it reads the row in 0.01 Hz where openWB "
+        "and SunGather read 0.1 Hz",
+        "daily PV export (13004 x 100) goes into a channel labelled W: not transcribed",
+        "battery current and power from the old rows 13020 (u16 x 0.1) and 13021 (u16); "
+        "capacity 13038 x 10",
+        "EMS mode, command and power (holding 13049-13051) written together with function 16; "
+        "a heartbeat at holding 13079 written with function 6",
+    ),
+)
+
+DEFINITIONS = {"sungrow_sh_rt": (*SH_RT, SH_RT_OPENEMS), "sungrow_sg_rt": SG_RT}
