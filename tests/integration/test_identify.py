@@ -58,6 +58,9 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
     # the ABB B23's type designation reads its model, as on the meter
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
+    # the Sungrow inverters' device type code reads their model, as on the inverter
+    sim.set_value(placed["sungrow_sh_rt"], "device_type_code", "SH10RT")
+    sim.set_value(placed["sungrow_sg_rt"], "device_type_code", "SG10RT")
     return sim
 
 

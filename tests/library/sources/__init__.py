@@ -12,19 +12,17 @@ another meaning (OpenEMS's "consumption" energy) gets the key of that meaning, s
 
 from __future__ import annotations
 
-from tests.library.source import SourceDefinition
-from tests.library.sources import (
-    abb,
-    carlo_gavazzi,
-    chint,
-    eastron,
-    eastron_sdm_modbus,
-    marstek,
-    orno,
-    victron,
-)
+import importlib
+import pkgutil
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, victron, marstek)
+from tests.library.source import SourceDefinition
+
+# every module of this package with a ``DEFINITIONS`` (a vendor's, or a source's), by name
+_MODULES = [
+    module
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name)
+    if hasattr(module := importlib.import_module(f"{__name__}.{info.name}"), "DEFINITIONS")
+]
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
