@@ -33,6 +33,7 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "nibe_s",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -118,6 +119,18 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
+    ),
+    "nibe_s": frozenset(
+        {
+            "hot_water_top_temperature type",
+            "hot_water_charging_temperature type",
+            "power_consumption type",
+            "power_consumption word_order",
+            "energy_consumed type",
+            "energy_consumed word_order",
+            # input 11 (brine out) and holding 11 (degree minutes): one address, two tables
+            "0x000b key",
+        }
     ),
 }
 
