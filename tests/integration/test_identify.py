@@ -58,6 +58,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
     # the ABB B23's type designation reads its model, as on the meter
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
+    # the Stiebel ISG's controller identification reads its WPM model, as on the device
+    sim.set_value(placed["stiebel_isg"], "controller_id", "wpm_3i")
     return sim
 
 

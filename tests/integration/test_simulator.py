@@ -36,6 +36,7 @@ NAMES = builtin_mapping_names()
 STATUS = {  # the simulated device is running and healthy
     "nastec_vasco": "running",
     "nibe_s": "heating",
+    "stiebel_isg": "program",
     "p2_vfd": "running_forward",
     "smartgen_hgm6100": "normal_running",
     "soft_starter": "no_fault",
@@ -45,6 +46,7 @@ WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),
     "nastec_vasco": ("operating_frequency", 40),
     "nibe_s": ("room_set_point", 21.5),
+    "stiebel_isg": ("comfort_temperature_hc1", 21.5),
     "p2_vfd": ("max_output_frequency", 60.5),
     "soft_starter": ("soft_start_time", 20),
     "vacon_nx": ("speed_reference", -25.5),

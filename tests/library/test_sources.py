@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "nibe_s",
+        "stiebel_isg",
     }
 )
 SOURCE_NAMES = re.compile(

@@ -21,9 +21,10 @@ from tests.library.sources import (
     eastron_sdm_modbus,
     nibe,
     orno,
+    stiebel,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, nibe)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, nibe, stiebel)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
