@@ -35,6 +35,7 @@ DEVICES = frozenset(
         "orno_we516",
         "nibe_s",
         "stiebel_isg",
+        "idm_navigator",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -131,6 +132,18 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "energy_consumed word_order",
             # input 11 (brine out) and holding 11 (degree minutes): one address, two tables
             "0x000b key",
+        }
+    ),
+    "idm_navigator": frozenset(
+        {
+            f"{key} table"
+            for key in (
+                "pv_surplus",
+                "heat_storage_temperature",
+                "hot_water_bottom_temperature",
+                "hot_water_top_temperature",
+                "electrical_power",
+            )
         }
     ),
 }

@@ -19,12 +19,13 @@ from tests.library.sources import (
     chint,
     eastron,
     eastron_sdm_modbus,
+    idm,
     nibe,
     orno,
     stiebel,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, nibe, stiebel)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, nibe, stiebel, idm)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
