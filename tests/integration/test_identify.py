@@ -61,6 +61,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     # the Sungrow inverters' device type code reads their model, as on the inverter
     sim.set_value(placed["sungrow_sh_rt"], "device_type_code", "SH10RT")
     sim.set_value(placed["sungrow_sg_rt"], "device_type_code", "SG10RT")
+    # the Stiebel ISG's controller identification reads its WPM model, as on the device
+    sim.set_value(placed["stiebel_isg"], "controller_id", "wpm_3i")
     return sim
 
 

@@ -35,6 +35,9 @@ Client = AsyncModbusTcpClient | AsyncModbusSerialClient
 NAMES = builtin_mapping_names()
 STATUS = {  # the simulated device is running and healthy
     "nastec_vasco": "running",
+    "nibe_s": "heating",
+    "stiebel_isg": "program",
+    "idm_navigator": "off",  # its status word is its bits, which the simulator leaves off
     "p2_vfd": "running_forward",
     "smartgen_hgm6100": "normal_running",
     "soft_starter": "no_fault",
@@ -43,6 +46,9 @@ STATUS = {  # the simulated device is running and healthy
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),
     "nastec_vasco": ("operating_frequency", 40),
+    "nibe_s": ("room_set_point", 21.5),
+    "stiebel_isg": ("comfort_temperature_hc1", 21.5),
+    "idm_navigator": ("pv_surplus", 2.5),
     "p2_vfd": ("max_output_frequency", 60.5),
     "soft_starter": ("soft_start_time", 20),
     "vacon_nx": ("speed_reference", -25.5),

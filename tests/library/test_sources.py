@@ -155,6 +155,30 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "0x138f key",
         }
     ),
+    "nibe_s": frozenset(
+        {
+            "hot_water_top_temperature type",
+            "hot_water_charging_temperature type",
+            "power_consumption type",
+            "power_consumption word_order",
+            "energy_consumed type",
+            "energy_consumed word_order",
+            # input 11 (brine out) and holding 11 (degree minutes): one address, two tables
+            "0x000b key",
+        }
+    ),
+    "idm_navigator": frozenset(
+        {
+            f"{key} table"
+            for key in (
+                "pv_surplus",
+                "heat_storage_temperature",
+                "hot_water_bottom_temperature",
+                "hot_water_top_temperature",
+                "electrical_power",
+            )
+        }
+    ),
 }
 
 DEFINITIONS = [d for defs in SOURCES.values() for d in defs]
