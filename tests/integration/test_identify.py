@@ -58,6 +58,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
     # the ABB B23's type designation reads its model, as on the meter
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
+    # the Terra AC's 4000h reads its connector type and rated power, as on the charger
+    sim.set_value(placed["abb_terra_ac"], "model_code", "type_2_socket_22_kw")
     return sim
 
 

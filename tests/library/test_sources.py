@@ -33,6 +33,7 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "abb_terra_ac",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -116,6 +117,7 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "reactive_energy_total scale",
         }
     ),
+    "abb_terra_ac": frozenset({"error_code_raw type", "error_code_raw word_order"}),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
     ),
