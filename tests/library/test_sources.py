@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "abb_terra_ac",
+        "alfen_eve",
     }
 )
 SOURCE_NAMES = re.compile(

@@ -16,6 +16,7 @@ from tests.library.source import SourceDefinition
 from tests.library.sources import (
     abb,
     abb_terra_ac,
+    alfen,
     carlo_gavazzi,
     chint,
     eastron,
@@ -23,7 +24,7 @@ from tests.library.sources import (
     orno,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, abb_terra_ac)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, abb_terra_ac, alfen)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
