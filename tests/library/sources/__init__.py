@@ -22,9 +22,20 @@ from tests.library.sources import (
     eastron,
     eastron_sdm_modbus,
     orno,
+    phoenix_contact,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, abb_terra_ac, alfen)
+_MODULES = (
+    eastron,
+    eastron_sdm_modbus,
+    abb,
+    carlo_gavazzi,
+    chint,
+    orno,
+    abb_terra_ac,
+    alfen,
+    phoenix_contact,
+)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
