@@ -39,6 +39,9 @@ STATUS = {  # the simulated device is running and healthy
     "smartgen_hgm6100": "normal_running",
     "soft_starter": "no_fault",
     "vacon_nx": True,
+    "abb_terra_ac": "a_idle",  # the chargers start with no vehicle (their first calm label)
+    "alfen_eve": "a_no_vehicle",
+    "phoenix_contact_ev": "a_no_vehicle",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),
@@ -46,6 +49,8 @@ WRITE = {  # a readable setting per mapping and a value inside its limits
     "p2_vfd": ("max_output_frequency", 60.5),
     "soft_starter": ("soft_start_time", 20),
     "vacon_nx": ("speed_reference", -25.5),
+    "alfen_eve": ("current_limit_setpoint", 13.2),
+    "phoenix_contact_ev": ("current_limit_setpoint", 10),
 }
 
 
