@@ -39,9 +39,9 @@ STATUS = {  # the simulated device is running and healthy
     "smartgen_hgm6100": "normal_running",
     "soft_starter": "no_fault",
     "vacon_nx": True,
-    "abb_terra_ac": "a_idle",  # the chargers start with no vehicle (their first calm label)
-    "alfen_eve": "a_no_vehicle",
-    "phoenix_contact_ev": "a_no_vehicle",
+    "abb_terra_ac": "c2_charging",
+    "alfen_eve": "c2_charging",
+    "phoenix_contact_ev": "c_charging",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),
