@@ -178,6 +178,9 @@ class Simulation(BaseModel):
     typical: float | None = None
     per_hour: float | None = Field(None, ge=0, description="a counter's rise per running hour")
     follows: str | None = Field(None, description="key of the entity whose value this shows")
+    state: str | None = Field(
+        None, description="the option an enum starts at (what a running device shows)"
+    )
 
     @model_validator(mode="after")
     def _ordered(self) -> Self:
@@ -668,7 +671,17 @@ def _check_write(e: Entity) -> str | None:
         e.table is not Table.COIL or e.access is not Access.WRITE or e.press is not None or e.pulse
     ):
         return "toggle_of is for a write-only coil that is not a button (a switch)"
-    return _check_state_from(e) or _check_dangerous_below(e)
+    return _check_state_from(e) or _check_dangerous_below(e) or _check_simulated_state(e)
+
+
+def _check_simulated_state(e: Entity) -> str | None:
+    """``simulate.state`` is one of the enum's options."""
+    state = e.simulate.state if e.simulate is not None else None
+    if state is None:
+        return None
+    if state not in (e.enum or {}).values():
+        return f"simulate.state: {state!r} is not one of the options"
+    return None
 
 
 def _check_state_from(e: Entity) -> str | None:

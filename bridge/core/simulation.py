@@ -235,6 +235,8 @@ def _initial_value(point: Point, is_status: bool, role: str) -> Value:
         return not entity.alarm and (is_status or any(word in words for word in _TRUE_WORDS))
     if role == "scale":
         return 0
+    if any(word in point.key.split("_") for word in _FAULT_WORDS):
+        return 0  # a fault code or fault word as a number: healthy is none
     low, high = number_range(point)
     value = _plausible_number(point, low, high) * {"min": 0.5, "max": 2.0}.get(role, 1.0)
     return round(min(max(value, low), high), entity.decimals)
@@ -243,6 +245,8 @@ def _initial_value(point: Point, is_status: bool, role: str) -> Value:
 def _initial_label(point: Point, is_status: bool) -> Value:
     entity = point.entity
     enum = entity.enum or {}
+    if entity.simulate is not None and entity.simulate.state is not None:
+        return entity.simulate.state
     if entity.alarm:
         normal = [raw for raw in entity.normal if raw in enum]
         return enum[normal[0]] if normal else entity.normal[0]

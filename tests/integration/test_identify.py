@@ -63,6 +63,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["sungrow_sg_rt"], "device_type_code", "SG10RT")
     # the Stiebel ISG's controller identification reads its WPM model, as on the device
     sim.set_value(placed["stiebel_isg"], "controller_id", "wpm_3i")
+    # the Terra AC's 4000h reads its connector type and rated power, as on the charger
+    sim.set_value(placed["abb_terra_ac"], "model_code", "type_2_socket_22_kw")
     return sim
 
 

@@ -42,6 +42,16 @@ STATUS = {  # the simulated device is running and healthy
     "smartgen_hgm6100": "normal_running",
     "soft_starter": "no_fault",
     "vacon_nx": True,
+    "abb_terra_ac": "c2_charging",
+    "alfen_eve": "c2_charging",
+    "phoenix_contact_ev": "c_charging",
+    "huawei_sun2000": "running_on_grid",
+    "growatt_min_mod": "normal",
+    "growatt_sph": "normal",
+    "sungrow_sh_rt": "running",
+    "sungrow_sg_rt": "running",
+    "victron_gx_system": "idle",
+    "marstek_venus_e": "discharge",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),
@@ -52,6 +62,8 @@ WRITE = {  # a readable setting per mapping and a value inside its limits
     "p2_vfd": ("max_output_frequency", 60.5),
     "soft_starter": ("soft_start_time", 20),
     "vacon_nx": ("speed_reference", -25.5),
+    "alfen_eve": ("current_limit_setpoint", 13.2),
+    "phoenix_contact_ev": ("current_limit_setpoint", 10),
 }
 
 

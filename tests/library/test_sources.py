@@ -104,6 +104,22 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "reactive_energy_total scale",
         }
     ),
+    "abb_terra_ac": frozenset({"error_code_raw type", "error_code_raw word_order"}),
+    "phoenix_contact_ev": frozenset(
+        {"current_limit_setpoint scale"}
+        | {
+            f"{key} type"
+            for key in (
+                "voltage_l1",
+                "voltage_l2",
+                "voltage_l3",
+                "current_l1",
+                "current_l2",
+                "current_l3",
+                "power",
+            )
+        }
+    ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
     ),
