@@ -58,6 +58,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
     # the ABB B23's type designation reads its model, as on the meter
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
+    # the Ethernet EM24's identification code reads its model, as on the meter
+    sim.set_value(placed["carlo_gavazzi_em24_e1"], "model_code", "EM24DINAV23XE1X")
     return sim
 
 

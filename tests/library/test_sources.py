@@ -28,6 +28,7 @@ DEVICES = frozenset(
         "eastron_sdm72d_m",
         "abb_b23",
         "carlo_gavazzi_em24",
+        "carlo_gavazzi_em24_e1",
         "carlo_gavazzi_em340",
         "chint_dtsu666",
         "chint_ddsu666",
