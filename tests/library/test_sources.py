@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "inepro_pro380",
     }
 )
 SOURCE_NAMES = re.compile(
