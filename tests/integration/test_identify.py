@@ -60,6 +60,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
     # the Ethernet EM24's identification code reads its model, as on the meter
     sim.set_value(placed["carlo_gavazzi_em24_e1"], "model_code", "EM24DINAV23XE1X")
+    # the Saia ALE3's type rows read its order number, as on the meter
+    sim.set_value(placed["saia_ale3"], "type_designation", "ALE3D5FD10C3A0")
     return sim
 
 

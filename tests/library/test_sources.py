@@ -35,6 +35,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "inepro_pro380",
+        "saia_ale3",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -118,6 +119,7 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "reactive_energy_total scale",
         }
     ),
+    "saia_ale3": frozenset({"0x001b key", "0x001f key"}),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
     ),

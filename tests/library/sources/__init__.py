@@ -21,9 +21,10 @@ from tests.library.sources import (
     eastron_sdm_modbus,
     inepro,
     orno,
+    saia,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, inepro)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, inepro, saia)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
