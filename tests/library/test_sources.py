@@ -36,6 +36,7 @@ DEVICES = frozenset(
         "orno_we516",
         "inepro_pro380",
         "saia_ale3",
+        "finder_7m38",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -120,6 +121,7 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
         }
     ),
     "saia_ale3": frozenset({"0x001b key", "0x001f key"}),
+    "finder_7m38": frozenset({"frequency address"}),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
     ),

@@ -19,12 +19,23 @@ from tests.library.sources import (
     chint,
     eastron,
     eastron_sdm_modbus,
+    finder,
     inepro,
     orno,
     saia,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, inepro, saia)
+_MODULES = (
+    eastron,
+    eastron_sdm_modbus,
+    abb,
+    carlo_gavazzi,
+    chint,
+    orno,
+    inepro,
+    saia,
+    finder,
+)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
