@@ -65,6 +65,10 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["stiebel_isg"], "controller_id", "wpm_3i")
     # the Terra AC's 4000h reads its connector type and rated power, as on the charger
     sim.set_value(placed["abb_terra_ac"], "model_code", "type_2_socket_22_kw")
+    # the Ethernet EM24's identification code reads its model, as on the meter
+    sim.set_value(placed["carlo_gavazzi_em24_e1"], "model_code", "EM24DINAV23XE1X")
+    # the Saia ALE3's type rows read its order number, as on the meter
+    sim.set_value(placed["saia_ale3"], "type_designation", "ALE3D5FD10C3A0")
     return sim
 
 

@@ -120,6 +120,8 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             )
         }
     ),
+    "saia_ale3": frozenset({"0x001b key", "0x001f key"}),
+    "finder_7m38": frozenset({"frequency address"}),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
     ),
