@@ -58,6 +58,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
     # the ABB B23's type designation reads its model, as on the meter
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
+    # the Huawei SUN2000's model string reads its model, as on the inverter
+    sim.set_value(placed["huawei_sun2000"], "model_name", "SUN2000-5KTL-M1")
     return sim
 
 

@@ -33,6 +33,7 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "huawei_sun2000",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -45,6 +46,14 @@ SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
 # "<key> <field>" where a device's sources read a point differently (field "key": a start
 # address read under different keys); the mapping authors resolve each one in their notes
 KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
+    "huawei_sun2000": frozenset(
+        {
+            "storage_soc type",
+            "grid_energy_export type",
+            "grid_energy_import type",
+            "export_limit_percent type",
+        }
+    ),
     "eastron_sdm630": frozenset({"frequency scale"}),
     "carlo_gavazzi_em24": frozenset(
         {
