@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "huawei_sun2000",
+        "growatt_min_mod",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -46,6 +47,28 @@ SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
 # "<key> <field>" where a device's sources read a point differently (field "key": a start
 # address read under different keys); the mapping authors resolve each one in their notes
 KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
+    "growatt_min_mod": frozenset(
+        {"grid_import_power address", "grid_export_power address"}
+        | {
+            f"{key} type"
+            for key in (
+                "input_power",
+                "pv1_power",
+                "pv2_power",
+                "pv3_power",
+                "pv4_power",
+                "grid_import_power",
+                "grid_export_power",
+                "pv_energy_total",
+                "grid_energy_import",
+                "grid_energy_export",
+                "battery_energy_charged",
+                "battery_energy_discharged",
+                "battery_charge_power",
+                "battery_discharge_power",
+            )
+        }
+    ),
     "huawei_sun2000": frozenset(
         {
             "storage_soc type",

@@ -19,11 +19,12 @@ from tests.library.sources import (
     chint,
     eastron,
     eastron_sdm_modbus,
+    growatt,
     huawei,
     orno,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, huawei)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, huawei, growatt)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
