@@ -41,6 +41,7 @@ STATUS = {  # the simulated device is running and healthy
     "vacon_nx": True,
     "huawei_sun2000": "running_on_grid",
     "growatt_min_mod": "normal",
+    "growatt_sph": "normal",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),

@@ -35,6 +35,7 @@ DEVICES = frozenset(
         "orno_we516",
         "huawei_sun2000",
         "growatt_min_mod",
+        "growatt_sph",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -47,6 +48,21 @@ SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
 # "<key> <field>" where a device's sources read a point differently (field "key": a start
 # address read under different keys); the mapping authors resolve each one in their notes
 KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
+    "growatt_sph": frozenset(
+        f"{key} type"
+        for key in (
+            "input_power",
+            "pv_energy_total",
+            "battery_discharge_power",
+            "battery_charge_power",
+            "battery_energy_charged",
+            "battery_energy_discharged",
+            "grid_import_power",
+            "grid_export_power",
+            "grid_energy_import",
+            "grid_energy_export",
+        )
+    ),
     "growatt_min_mod": frozenset(
         {"grid_import_power address", "grid_export_power address"}
         | {
