@@ -77,7 +77,7 @@ def plausible(point: Point) -> Plausible | None:
     """The table's entry for ``point``, with its mapping's ``simulate:`` hint applied."""
     found = _from_table(point)
     hint = point.entity.simulate
-    if hint is None:
+    if hint is None or point.entity.enum is not None:  # an enum's hint is its state
         return found
     base = found or Plausible(float("-inf"), float("inf"), 0.0)
     low = hint.min if hint.min is not None else base.low

@@ -69,6 +69,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["carlo_gavazzi_em24_e1"], "model_code", "EM24DINAV23XE1X")
     # the Saia ALE3's type rows read its order number, as on the meter
     sim.set_value(placed["saia_ale3"], "type_designation", "ALE3D5FD10C3A0")
+    # the Huawei SUN2000's model string reads its model, as on the inverter
+    sim.set_value(placed["huawei_sun2000"], "model_name", "SUN2000-5KTL-M1")
     return sim
 
 

@@ -33,6 +33,51 @@ SHARED_REGISTERS: frozenset[tuple[str, str, str, str]] = frozenset()
 # "<key> <field>" where a device's sources read a point differently (field "key": a start
 # address read under different keys); the mapping authors resolve each one in their notes
 KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
+    "growatt_sph": frozenset(
+        f"{key} type"
+        for key in (
+            "input_power",
+            "pv_energy_total",
+            "battery_discharge_power",
+            "battery_charge_power",
+            "battery_energy_charged",
+            "battery_energy_discharged",
+            "grid_import_power",
+            "grid_export_power",
+            "grid_energy_import",
+            "grid_energy_export",
+        )
+    ),
+    "growatt_min_mod": frozenset(
+        {"grid_import_power address", "grid_export_power address"}
+        | {
+            f"{key} type"
+            for key in (
+                "input_power",
+                "pv1_power",
+                "pv2_power",
+                "pv3_power",
+                "pv4_power",
+                "grid_import_power",
+                "grid_export_power",
+                "pv_energy_total",
+                "grid_energy_import",
+                "grid_energy_export",
+                "battery_energy_charged",
+                "battery_energy_discharged",
+                "battery_charge_power",
+                "battery_discharge_power",
+            )
+        }
+    ),
+    "huawei_sun2000": frozenset(
+        {
+            "storage_soc type",
+            "grid_energy_export type",
+            "grid_energy_import type",
+            "export_limit_percent type",
+        }
+    ),
     "eastron_sdm630": frozenset({"frequency scale"}),
     "carlo_gavazzi_em24": frozenset(
         {
