@@ -58,6 +58,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["nastec_vasco"], "modbus_address", placed["nastec_vasco"])
     # the ABB B23's type designation reads its model, as on the meter
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
+    # the Deye hybrid's device type register reads its family's code, as on the inverter
+    sim.set_value(placed["deye_hybrid"], "device_type", "lv_three_phase_hybrid")
     return sim
 
 

@@ -39,6 +39,7 @@ STATUS = {  # the simulated device is running and healthy
     "smartgen_hgm6100": "normal_running",
     "soft_starter": "no_fault",
     "vacon_nx": True,
+    "deye_hybrid": "running",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),

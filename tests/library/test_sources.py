@@ -33,6 +33,7 @@ DEVICES = frozenset(
         "chint_ddsu666",
         "orno_we514",
         "orno_we516",
+        "deye_hybrid",
     }
 )
 SOURCE_NAMES = re.compile(
@@ -115,6 +116,10 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
             "reactive_energy_total type",
             "reactive_energy_total scale",
         }
+    ),
+    "deye_hybrid": frozenset(
+        {f"{key} type" for key in ("load_power_l1", "load_power_l2", "load_power_l3", "load_power")}
+        | {"pv1_power type", "pv2_power type"}
     ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}

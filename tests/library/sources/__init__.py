@@ -13,9 +13,17 @@ another meaning (OpenEMS's "consumption" energy) gets the key of that meaning, s
 from __future__ import annotations
 
 from tests.library.source import SourceDefinition
-from tests.library.sources import abb, carlo_gavazzi, chint, eastron, eastron_sdm_modbus, orno
+from tests.library.sources import (
+    abb,
+    carlo_gavazzi,
+    chint,
+    deye,
+    eastron,
+    eastron_sdm_modbus,
+    orno,
+)
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, deye)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
