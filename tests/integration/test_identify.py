@@ -60,6 +60,9 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["abb_b23"], "type_designation", "B23")
     # the Deye hybrid's device type register reads its family's code, as on the inverter
     sim.set_value(placed["deye_hybrid"], "device_type", "lv_three_phase_hybrid")
+    # the SolaX X3-Hybrid G4's serial number and machine type read an X3 G4's
+    sim.set_value(placed["solax_x3_hybrid"], "serial_number", "H34A10I1234567")
+    sim.set_value(placed["solax_x3_hybrid"], "machine_type", "x3")
     return sim
 
 

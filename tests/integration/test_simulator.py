@@ -40,6 +40,7 @@ STATUS = {  # the simulated device is running and healthy
     "soft_starter": "no_fault",
     "vacon_nx": True,
     "deye_hybrid": "running",
+    "solax_x3_hybrid": "running",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),

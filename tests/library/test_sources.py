@@ -34,6 +34,7 @@ DEVICES = frozenset(
         "orno_we514",
         "orno_we516",
         "deye_hybrid",
+        "solax_x3_hybrid",
     }
 )
 SOURCE_NAMES = re.compile(

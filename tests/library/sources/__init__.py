@@ -21,9 +21,10 @@ from tests.library.sources import (
     eastron,
     eastron_sdm_modbus,
     orno,
+    solax,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, deye)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, deye, solax)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
