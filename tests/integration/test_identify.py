@@ -63,6 +63,8 @@ def simulated(placed: dict[str, int]) -> Simulator:
     # the SolaX X3-Hybrid G4's serial number and machine type read an X3 G4's
     sim.set_value(placed["solax_x3_hybrid"], "serial_number", "H34A10I1234567")
     sim.set_value(placed["solax_x3_hybrid"], "machine_type", "x3")
+    # the GoodWe ET's serial number carries its model tag (ETU), as on the inverter
+    sim.set_value(placed["goodwe_et"], "serial_number", "95010ETU224W0001")
     return sim
 
 

@@ -41,6 +41,7 @@ STATUS = {  # the simulated device is running and healthy
     "vacon_nx": True,
     "deye_hybrid": "running",
     "solax_x3_hybrid": "running",
+    "goodwe_et": "running_on_grid",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),

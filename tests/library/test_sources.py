@@ -35,6 +35,7 @@ DEVICES = frozenset(
         "orno_we516",
         "deye_hybrid",
         "solax_x3_hybrid",
+        "goodwe_et",
     }
 )
 SOURCE_NAMES = re.compile(

@@ -20,11 +20,12 @@ from tests.library.sources import (
     deye,
     eastron,
     eastron_sdm_modbus,
+    goodwe,
     orno,
     solax,
 )
 
-_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, deye, solax)
+_MODULES = (eastron, eastron_sdm_modbus, abb, carlo_gavazzi, chint, orno, deye, solax, goodwe)
 
 SOURCES: dict[str, tuple[SourceDefinition, ...]] = {}
 for _module in _MODULES:
