@@ -121,7 +121,8 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     ),
     "deye_hybrid": frozenset(
         {f"{key} type" for key in ("load_power_l1", "load_power_l2", "load_power_l3", "load_power")}
-        | {"pv1_power type", "pv2_power type"}
+        | {f"{key} type" for key in ("load_voltage_l1", "load_voltage_l2", "load_voltage_l3")}
+        | {"pv1_power type", "pv2_power type", "battery_soc type", "grid_frequency type"}
     ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}

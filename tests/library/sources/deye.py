@@ -14,6 +14,7 @@ from tests.library.sources.upstream import EVCC
 
 SUNSYNK = "kellerza/sunsynk@58193d5de98e272dbcc70d5fc82a0cb5c8044abd"
 SOLARMAN = "StephanJoubert/home_assistant_solarman@d4296b16415dc9187a74fbaf249bfd71417c38aa"
+OPENWB = "openWB/core@3039a21010759129b7dd182df0e7e183fed28baa"
 
 
 def _p(
@@ -129,6 +130,27 @@ EVCC_LV = (
     _p("pv2_power", 673, "u16", "W", 1.0, "pv power (PV2)"),
 )
 
+# packages/modules/devices/deye/deye/{bat,counter,inverter}.py: the three-phase branch (LV
+# codes 0x0005/0x0500, HV 0x0006), every register read as INT_16
+OPENWB_3P = (
+    _p("battery_soc", 588, "s16", "%", 1.0, "bat soc"),
+    _p("battery_power", 590, "s16", "W", 1.0, "bat power"),
+    _p("grid_frequency", 609, "s16", "Hz", 0.01, "counter frequency"),
+    *_phases("external_ct_current", 613, "s16", "A", 0.01, "counter currents"),
+    *_phases("external_ct_power", 616, "s16", "W", 1.0, "counter powers"),
+    *_phases("load_voltage", 644, "s16", "V", 0.1, "counter voltages"),
+    _p("pv1_power", 672, "s16", "W", 1.0, "inverter power (PV1)"),
+    _p("pv2_power", 673, "s16", "W", 1.0, "inverter power (PV2)"),
+)
+
+EVCC_NOTES = (
+    "batterytype lv; with hv: battery power and PV power x10, max sell power in 10 W; "
+    "hv with firmware 1098 or newer: energy totals in whole kWh (scale 1)",
+    "its grid currents are the CT currents 613-615 ('out-of-grid current')",
+    "writes with function 16 (writemultiple): 109, 127, 128, 130, 143, 146 (the whole "
+    "word: 0x00FF = time of use on every weekday, 0 = off), 166-171",
+)
+
 DEYE_HYBRID = (
     SourceDefinition(
         device="deye_hybrid",
@@ -170,12 +192,25 @@ DEYE_HYBRID = (
         source="evcc",
         ref=f"{EVCC}:templates/definition/meter/deye-hybrid-3p.yaml",
         points=EVCC_LV,
+        notes=EVCC_NOTES,
+    ),
+    SourceDefinition(
+        device="deye_hybrid",
+        source="openwb",
+        ref=f"{OPENWB}:packages/modules/devices/deye/deye/counter.py",
+        points=OPENWB_3P,
         notes=(
-            "batterytype lv; with hv: battery power and PV power x10, max sell power in 10 W; "
-            "hv with firmware 1098 or newer: energy totals in whole kWh (scale 1)",
-            "its grid currents are the CT currents 613-615 ('out-of-grid current')",
-            "writes with function 16 (writemultiple): 109, 127, 128, 130, 143, 146 (the whole "
-            "word: 0x00FF = time of use on every weekday, 0 = off), 166-171",
+            "the battery (bat.py) and PV (inverter.py) points are read the same way in the "
+            "sibling files of that folder",
+            "reads the device type at register 0 first: 0x0005 and 0x0500 LV, 0x0006 HV "
+            "three-phase (device_type.py); the HV branch multiplies the battery and PV "
+            "powers by 10",
+            "every register is read as a signed 16-bit value, the SoC, voltages and "
+            "frequency included",
+            "negates the battery power (+ charging in openWB) and the PV power (- generation "
+            "in openWB): same register and scale",
+            "its grid meter takes the CT powers 616-618 summed, the CT currents 613-615 and "
+            "the load-side voltages 644-646 as the grid voltages",
         ),
     ),
 )
