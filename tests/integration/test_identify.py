@@ -71,6 +71,13 @@ def simulated(placed: dict[str, int]) -> Simulator:
     sim.set_value(placed["saia_ale3"], "type_designation", "ALE3D5FD10C3A0")
     # the Huawei SUN2000's model string reads its model, as on the inverter
     sim.set_value(placed["huawei_sun2000"], "model_name", "SUN2000-5KTL-M1")
+    # the Deye hybrid's device type register reads its family's code, as on the inverter
+    sim.set_value(placed["deye_hybrid"], "device_type", "lv_three_phase_hybrid")
+    # the SolaX X3-Hybrid G4's serial number and machine type read an X3 G4's
+    sim.set_value(placed["solax_x3_hybrid"], "serial_number", "H34A10I1234567")
+    sim.set_value(placed["solax_x3_hybrid"], "machine_type", "x3")
+    # the GoodWe ET's serial number carries its model tag (ETU), as on the inverter
+    sim.set_value(placed["goodwe_et"], "serial_number", "95010ETU224W0001")
     return sim
 
 

@@ -52,6 +52,9 @@ STATUS = {  # the simulated device is running and healthy
     "sungrow_sg_rt": "running",
     "victron_gx_system": "idle",
     "marstek_venus_e": "discharge",
+    "deye_hybrid": "running",
+    "solax_x3_hybrid": "running",
+    "goodwe_et": "running_on_grid",
 }
 WRITE = {  # a readable setting per mapping and a value inside its limits
     "eastron_sdm630": ("demand_period", 15),

@@ -167,6 +167,11 @@ KNOWN_DISAGREEMENTS: dict[str, frozenset[str]] = {
     ),
     "saia_ale3": frozenset({"0x001b key", "0x001f key"}),
     "finder_7m38": frozenset({"frequency address"}),
+    "deye_hybrid": frozenset(
+        {f"{key} type" for key in ("load_power_l1", "load_power_l2", "load_power_l3", "load_power")}
+        | {f"{key} type" for key in ("load_voltage_l1", "load_voltage_l2", "load_voltage_l3")}
+        | {"pv1_power type", "pv2_power type", "battery_soc type", "grid_frequency type"}
+    ),
     "orno_we516": frozenset(
         {"reactive_power_l1 scale", "reactive_power_l2 scale", "reactive_power_l3 scale"}
     ),
