@@ -240,8 +240,8 @@ class DeviceState:
             if not span.isdisjoint(refused):
                 value: Value = None
             elif span <= fresh:
-                if point.scale_source is not None and not self._one_request(point):
-                    found = self._bracketed(point, since)
+                if point.scale_source is not None:
+                    found = self._scaled_image(point, since)
                     if found is None:
                         continue
                     image = found
@@ -263,27 +263,39 @@ class DeviceState:
             self.values[key] = value
         return frozenset(changed)
 
-    def _one_request(self, point: Point) -> bool:
-        """Every word of the point and its exponent came in one request."""
-        requests = {self.request_of.get(cell) for cell in point.footprint}
-        return len(requests) == 1 and None not in requests
-
-    def _bracketed(self, point: Point, since: int | None) -> Image | None:
-        """The image to decode a value read apart from its exponent with: the exponent as
-        read before and after it (requests after ``since``), every reading the same; None
-        when it was not so read (a changed exponent is counted: ``scaled_values_held``)."""
+    def _scaled_image(self, point: Point, since: int | None) -> Image | None:
+        """The image to decode a ``scale_by`` value with: its exponent as read in the
+        request of its words, or, read apart (bracketed), as read before and after them
+        in requests after ``since``, every reading the same; None when neither (a changed
+        exponent is counted: ``scaled_values_held``)."""
         source = point.scale_source
-        if since is None or source is None or source.count != 1:
+        if source is None or source.count != 1:
             return None
         (cell,) = source.addresses
-        requests = {self.request_of[c] for c in point.addresses}
-        readings = [r for r in self.readings.get(cell, ()) if r[0] > since]
-        found = verdict(readings, requests)
+        requests = {self.request_of.get(c) for c in point.addresses}
+        if None in requests:
+            return None
+        readings = self.readings.get(cell, [])
+        if len(requests) == 1:  # its exponent in the same request (a later read may differ)
+            (number,) = requests
+            word = next((w for n, w in readings if n == number), None)
+            if word is not None:
+                return self._with(cell, word)
+        if since is None:
+            return None
+        numbers = {n for n in requests if n is not None}
+        bracket = [r for r in readings if r[0] > since]
+        found = verdict(bracket, numbers)
         if found is Verdict.CHANGED:
             self.scaled_values_held += 1
         if found is not Verdict.SAME:
             return None
-        word = next(word for number, word in reversed(readings) if number < min(requests))
+        return self._with(cell, next(w for n, w in reversed(bracket) if n < min(numbers)))
+
+    def _with(self, cell: Address, word: int) -> Image:
+        """The image with ``cell`` as ``word`` (the image itself when it holds it)."""
+        if self.image.get(cell) == word:
+            return self.image
         return ChainMap({cell: word}, self.image)
 
     def unconfirmed(self, brackets: Iterable[Bracket], since: int) -> tuple[Read, ...]:
