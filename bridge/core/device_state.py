@@ -236,7 +236,7 @@ class DeviceState:
             if not point.entity.readable:
                 continue
             span = point.footprint
-            image = self.image
+            image: Image = self.image
             if not span.isdisjoint(refused):
                 value: Value = None
             elif span <= fresh:
