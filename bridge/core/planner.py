@@ -13,10 +13,24 @@ it is longer than that max (Nastec: one register per read): it is then cut into 
 registers that group like any other atoms, which reads it in limit-sized chunks from its
 first register (the 6-register Nastec MAC address takes six reads). A 64-bit number is
 never cut (no tear check joins four words): where reads are shorter (a limit learnt from
-the device) it is left out, named in ``Plan.unplannable``. Nor is a ``scale_by`` number
-ever read apart from its exponent register: its atom runs from the first to the last
-register of the two (``Point.extent``), so a value is never scaled by another read's
-exponent; where no read can hold both it is left out and named the same way.
+the device) it is left out, named in ``Plan.unplannable``.
+
+A ``scale_by`` number is read with its exponent register wherever one read can hold both:
+its atom runs from the first to the last register of the two (``Point.extent``), so the
+value is scaled by the exponent of its own request. Where no read can (the two farther
+apart than the max count, a segment boundary, an unreadable register or, without
+readable gaps, an undefined one between them: SunSpec model 129's third and fourth
+curves, the 7xx DER curves), it is read *bracketed* (bridge/core/bracket.py): its atom is
+its own registers, its exponent is planned as a point of its own (due or not), and
+``Plan.bracketed`` holds one ``Bracket`` per exponent with every far value it scales. A
+pass reads the exponent before the values and again after them (the plan's own read of
+it serves the side it lies on; the other gets a dedicated one-register read, shared by
+every value of that exponent: ``Plan.extra``, counted by ``cost_of``), and the device
+state decodes a value only when every reading of its exponent from before to after is
+the same (bridge/core/device_state.py); else it keeps its last value that pass, counted
+in health as ``scaled_values_held``. Where atoms of values near their exponents overlap
+into one longer than a read, the value farthest from its exponent is bracketed, until
+they fit. Only a value whose exponent register cannot be read at all is left out.
 
 ``plan_reads`` is exact: dynamic programming over the sorted atoms of each table (blocks
 are contiguous runs of atoms; reading an atom twice never pays). A hole is read through
