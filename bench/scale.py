@@ -291,7 +291,9 @@ async def profile(seconds: float, output: str, case: str) -> None:
         broker.start()
         try:
             poll = {"fast": PERIOD, "slow": slow}
-            async with bridge_process(folder, broker.url, units, ports, poll, folder / "p", output):
+            async with bridge_process(
+                folder, broker.url, units, ports, poll, folder / "p", output
+            ):
                 await asyncio.sleep(seconds)
         finally:
             broker.stop()
