@@ -241,7 +241,7 @@ class DeviceState:
                 value: Value = None
             elif span <= fresh:
                 if point.scale_source is not None:
-                    found = self._scaled_image(point, since)
+                    found = self._scaled_image(point, point.scale_source, since)
                     if found is None:
                         continue
                     image = found
@@ -263,15 +263,12 @@ class DeviceState:
             self.values[key] = value
         return frozenset(changed)
 
-    def _scaled_image(self, point: Point, since: int | None) -> Image | None:
-        """The image to decode a ``scale_by`` value with: its exponent as read in the
-        request of its words, or, read apart (bracketed), as read before and after them
-        in requests after ``since``, every reading the same; None when neither (a changed
-        exponent is counted: ``scaled_values_held``)."""
-        source = point.scale_source
-        if source is None or source.count != 1:
-            return None
-        (cell,) = source.addresses
+    def _scaled_image(self, point: Point, source: Point, since: int | None) -> Image | None:
+        """The image to decode a ``scale_by`` value with: its exponent (``source``, one
+        register) as read in the request of its words, or, read apart (bracketed), as read
+        before and after them in requests after ``since``, every reading the same; None
+        when neither (a changed exponent is counted: ``scaled_values_held``)."""
+        cell = (source.table, source.address)
         requests = {self.request_of.get(c) for c in point.addresses}
         if None in requests:
             return None

@@ -238,7 +238,13 @@ def _units(
     lost = {p.key for p in points if any((table, a) in limits.unreadable for a in p.span)}
     lost |= {p.key for p in points if _wide(p) and _too_long(table, p, limits)}
     far = {p.key for p in points if not _scaled_readable(table, p, limits, defined)}
-    lost |= {k for k in far if not _exponent_readable(table, _by_key(points, k), limits)}
+    lost |= {
+        p.key
+        for p in points
+        if p.key in far
+        and p.scale_source is not None
+        and not _exponent_readable(table, p.scale_source, limits)
+    }
     far -= lost
     while True:
         units: list[_Unit] = []
@@ -263,10 +269,6 @@ def _units(
             return units, lost | cut, far - cut
 
 
-def _by_key(points: Sequence[Point], key: str) -> Point:
-    return next(p for p in points if p.key == key)
-
-
 def _exponents(points: Sequence[Point], far: set[str]) -> list[Point]:
     """The exponents of the bracketed values: read by the plan, due or not."""
     found = {p.scale_source.key: p.scale_source for p in points if p.key in far and p.scale_source}
@@ -274,14 +276,10 @@ def _exponents(points: Sequence[Point], far: set[str]) -> list[Point]:
     return [p for k, p in sorted(found.items()) if k not in own]
 
 
-def _exponent_readable(table: Table, point: Point, limits: ReadLimits) -> bool:
-    """A bracketed value's exponent register can be read on its own."""
-    source = point.scale_source
-    if source is None:
-        return False
-    if any((table, a) in limits.unreadable for a in source.span):
-        return False
-    return _region(table, source.address, source.span.stop, limits) is not None
+def _exponent_readable(table: Table, source: Point, limits: ReadLimits) -> bool:
+    """A bracketed value's exponent register can be read on its own (one register: it
+    fits any read and crosses no segment boundary)."""
+    return all((table, a) not in limits.unreadable for a in source.span)
 
 
 def _scaled_readable(

@@ -208,3 +208,44 @@ def test_a_value_read_before_its_exponent_uses_the_factor_of_its_bracket() -> No
     assert device.requests == since + 3  # sf, v, sf (the plan's own read of it after v)
     device.decode_fresh(["v"], fresh, since)
     assert device.values["v"] == 500
+
+
+def shared() -> Mapping:
+    """One exponent scaling a value beside it and a value 300 registers on."""
+    return make_mapping(
+        {
+            "sf": {"name": "Scale", "address": 0, "type": "s16"},
+            "near": {"name": "Near", "address": 1, "scale_by": "sf"},
+            "far": {"name": "Far", "address": 300, "scale_by": "sf"},
+        }
+    )
+
+
+def test_a_value_read_with_its_exponent_keeps_that_reading_when_it_is_read_again() -> None:
+    device = DeviceState(shared(), {}, timing=LinkTiming(), recheck=60.0)
+    # sf -1 with near and far; sf is -2 by the read after far: far held, near as read
+    fresh, since = answer_pass(device, {0: 0xFFFF, 1: 123, 300: 456}, after={0: 0xFFFE})
+    assert device.image[(H, 0)] == 0xFFFE
+    device.decode_fresh(["near", "far"], fresh, since)
+    assert device.values["near"] == 12.3  # at -1, the exponent of its own request
+    assert "far" not in device.values
+    assert device.scaled_values_held == 1
+
+
+def test_a_bracket_the_bus_did_not_close_is_held_and_not_counted() -> None:
+    device = DeviceState(shared(), {}, timing=LinkTiming(), recheck=60.0)
+    fresh: set[tuple[Table, int]] = set()
+    since = device.requests
+    for read in device.plan(DUE):  # the exponent read after them failed
+        device.keep(read, tuple(0xFFFF if a == 0 else 5 for a in read.span), fresh)
+    assert device.unconfirmed(device.brackets(DUE), since) == (Read(H, 0, 1),)
+    device.decode_fresh(["near", "far"], fresh, since)
+    assert device.values == {"near": 0.5}
+    assert device.scaled_values_held == 0
+
+
+def test_no_exponent_read_is_asked_for_values_the_pass_did_not_read() -> None:
+    device = DeviceState(shared(), {}, timing=LinkTiming(), recheck=60.0)
+    since = device.requests
+    device.keep(Read(H, 0, 2), (0xFFFF, 5), set())  # the far value's read failed
+    assert device.unconfirmed(device.brackets(DUE), since) == ()
