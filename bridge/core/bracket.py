@@ -14,7 +14,8 @@ brackets. The plan's own read of the exponent serves as the reading before (it p
 every read of the values, the usual layout: a model's factors at its top) or after (it
 follows them); a side it cannot serve gets a dedicated one-register read, before the pass
 or after it. The exponent's reads are shared by every far value it scales: one extra read
-per exponent and pass in the usual layout, two when far values lie on both sides of it.
+per exponent and pass in the usual layout, two when far values lie on both sides of it;
+exponents side by side (SunSpec's factors) are read in one (``planner.join_reads``).
 
 What the bus answered is judged by ``verdict``: the exponent's readings of this pass
 (request number, word), and the request numbers the value's words came in.
@@ -42,11 +43,6 @@ class Bracket:
     keys: tuple[str, ...]
     before: bool
     after: bool
-
-    @property
-    def extra(self) -> tuple[Read, ...]:
-        """The dedicated reads this bracket costs a pass (zero, one or two)."""
-        return (self.exponent,) * (int(self.before) + int(self.after))
 
 
 class Verdict(enum.Enum):

@@ -33,7 +33,15 @@ from bridge.core.codec import Image, Value, decimals_of, decode
 from bridge.core.counters import Kind, Reading, counters_of
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Mapping, Point, printed_address
-from bridge.core.planner import Address, Plan, ReadLimits, addresses_of, limits_for, plan_reads
+from bridge.core.planner import (
+    Address,
+    Plan,
+    ReadLimits,
+    addresses_of,
+    join_reads,
+    limits_for,
+    plan_reads,
+)
 from bridge.core.protocol import Protocol
 from bridge.core.refusal_memory import RefusalMemory
 from bridge.core.request import Read, Write
@@ -306,7 +314,12 @@ class DeviceState:
             readings = [r for r in self.readings.get(cell, ()) if r[0] > since]
             if requests and needs_after(readings, requests):
                 reads.append(bracket.exponent)
-        return tuple(reads)
+        return join_reads(reads, self.limits())
+
+    def exponents_before(self, brackets: Iterable[Bracket]) -> tuple[Read, ...]:
+        """The exponent reads to send before a pass: those whose plan read follows a
+        value's (joined where they lie side by side)."""
+        return join_reads((b.exponent for b in brackets if b.before), self.limits())
 
     # --- counters ------------------------------------------------------------------------
 

@@ -25,7 +25,8 @@ its own registers, its exponent is planned as a point of its own (due or not), a
 ``Plan.bracketed`` holds one ``Bracket`` per exponent with every far value it scales. A
 pass reads the exponent before the values and again after them (the plan's own read of
 it serves the side it lies on; the other gets a dedicated one-register read, shared by
-every value of that exponent: ``Plan.extra``, counted by ``cost_of``), and the device
+every value of that exponent, and joined with its neighbours' (``join_reads``: SunSpec's
+factors lie side by side): ``Plan.extra``, counted by ``cost_of``), and the device
 state decodes a value only when every reading of its exponent from before to after is
 the same (bridge/core/device_state.py); else it keeps its last value that pass, counted
 in health as ``scaled_values_held``. Where atoms of values near their exponents overlap
@@ -120,11 +121,7 @@ class Plan:
     reads: tuple[Read, ...]
     unplannable: tuple[str, ...] = ()
     bracketed: tuple[Bracket, ...] = ()
-
-    @property
-    def extra(self) -> tuple[Read, ...]:
-        """The dedicated exponent reads the brackets add to a pass."""
-        return tuple(read for bracket in self.bracketed for read in bracket.extra)
+    extra: tuple[Read, ...] = ()  # the dedicated exponent reads the brackets add to a pass
 
 
 def limits_for(
@@ -221,7 +218,25 @@ def plan_reads(points: Iterable[Point], limits: ReadLimits) -> Plan:
         planned = _plan_table(table, units, limits, defined)
         reads += planned
         brackets += brackets_of(_far_values(mine, far), planned)
-    return Plan(tuple(reads), tuple(sorted(unplannable)), tuple(brackets))
+    before = join_reads([b.exponent for b in brackets if b.before], limits)
+    after = join_reads([b.exponent for b in brackets if b.after], limits)
+    return Plan(tuple(reads), tuple(sorted(unplannable)), tuple(brackets), before + after)
+
+
+def join_reads(reads: Iterable[Read], limits: ReadLimits) -> tuple[Read, ...]:
+    """Exponent reads of registers next to each other as one read (SunSpec's factors lie
+    side by side), within the max count and a segment; sorted."""
+    joined: list[Read] = []
+    for read in sorted(set(reads), key=lambda r: (r.table, r.address)):
+        last = joined[-1] if joined else None
+        if last is not None and last.table is read.table and last.span.stop == read.address:
+            both = Read(read.table, last.address, last.count + read.count)
+            place = _region(both.table, both.address, both.span.stop, limits)
+            if place is not None and both.count <= place[1]:
+                joined[-1] = both
+                continue
+        joined.append(read)
+    return tuple(joined)
 
 
 def _far_values(points: Sequence[Point], far: set[str]) -> Iterator[tuple[str, Table, range, int]]:

@@ -33,9 +33,8 @@ async def read_before(
     """Read the exponents whose plan read follows a value's; return the request count
     before them (what ``decode_fresh`` judges the pass's readings from)."""
     since = state.requests
-    for bracket in brackets:
-        if bracket.before:
-            await link.read_block(bracket.exponent, priority, fresh)
+    for read in state.exponents_before(brackets):
+        await link.read_block(read, priority, fresh)
     return since
 
 

@@ -146,9 +146,8 @@ def answer_pass(device: DeviceState, words: dict[int, int], after: dict[int, int
     fresh: set[tuple[Table, int]] = set()
     since = device.requests
     brackets = device.brackets(DUE)
-    for bracket in brackets:
-        if bracket.before:
-            device.keep(bracket.exponent, (words[bracket.exponent.address],), fresh)
+    for read in device.exponents_before(brackets):
+        device.keep(read, tuple(words[a] for a in read.span), fresh)
     for read in device.plan(DUE):
         device.keep(read, tuple(words.get(a, 0) for a in read.span), fresh)
     for read in device.unconfirmed(brackets, since):
@@ -249,3 +248,36 @@ def test_no_exponent_read_is_asked_for_values_the_pass_did_not_read() -> None:
     since = device.requests
     device.keep(Read(H, 0, 2), (0xFFFF, 5), set())  # the far value's read failed
     assert device.unconfirmed(device.brackets(DUE), since) == ()
+
+
+def factors_side_by_side(**top: Any) -> Mapping:
+    return make_mapping(
+        {
+            "v_sf": {"name": "V scale", "address": 0, "type": "s16"},
+            "w_sf": {"name": "W scale", "address": 1, "type": "s16"},
+            "v": {"name": "V", "address": 300, "scale_by": "v_sf"},
+            "w": {"name": "W", "address": 301, "scale_by": "w_sf"},
+        },
+        **top,
+    )
+
+
+def test_factors_side_by_side_are_read_again_in_one_read() -> None:
+    plan = plan_of(factors_side_by_side())
+    assert [b.exponent for b in plan.bracketed] == [Read(H, 0, 1), Read(H, 1, 1)]
+    assert plan.extra == (Read(H, 0, 2),)
+    device = DeviceState(factors_side_by_side(), {}, timing=LinkTiming(), recheck=60.0)
+    fresh, since = answer_pass(device, {0: 0xFFFF, 1: 2, 300: 2301, 301: 7}, after={})
+    assert device.requests == since + 3  # 0..1, 300..301, then 0..1 again
+    device.decode_fresh(["v", "w"], fresh, since)
+    assert device.values == {"v": 230.1, "w": 700}
+
+
+def test_factors_are_joined_only_within_a_read_and_a_segment() -> None:
+    assert plan_of(factors_side_by_side(), max_registers=1).extra == (
+        Read(H, 0, 1),
+        Read(H, 1, 1),
+    )
+    segments = [{"name": "a", "start": 0, "end": 0}, {"name": "b", "start": 1, "end": 400}]
+    plan = plan_of(factors_side_by_side(protocol={"segments": segments}))
+    assert plan.extra == (Read(H, 0, 1), Read(H, 1, 1))
