@@ -6,12 +6,13 @@ Per device image of the tests (tests/sunspec_devices.py, the marker at 40000): t
 mapping built from its walk (``bridge/sunspec/mapping.py``), and the reads the planner
 (``bridge/core/planner.py``) makes of it, at 125 registers per read, for a pass of every
 entity (the first one, or a ``get``), a pass of the entities due every ``fast`` interval
-(measurements) and of those due every ``slow`` one (settings, ratings, scale factors);
-each as requests / registers / wire ms on Modbus RTU at 9600 8N1 (turnaround 0,
-``bridge/core/timing.py``). The minimum: the models' registers in reads of 125, one model
-after the other (ceil(registers / 125)). Beside it what pysunspec2 reads to refresh the
-device (``SunSpecModbusClientDevice.read``: every model whole, each in reads of at most
-125). The once-only reads (the walk and ``read_chain`` at start) are not in any pass.
+(measurements) and of those due every ``slow`` one (settings, ratings, scale factors),
+the exponent reads of bracketed values included; each as requests / registers / wire ms
+on Modbus RTU at 9600 8N1 (turnaround 0, ``bridge/core/timing.py``). The minimum: the
+models' registers in reads of 125, one model after the other (ceil(registers / 125)).
+Beside it what pysunspec2 reads to refresh the device
+(``SunSpecModbusClientDevice.read``: every model whole, each in reads of at most 125).
+The once-only reads (the walk and ``read_chain`` at start) are not in any pass.
 """
 
 from __future__ import annotations
@@ -43,7 +44,10 @@ def figures(reads: tuple[Read, ...] | list[Read]) -> str:
 
 
 def plan(wanted: list[Point], limits: ReadLimits) -> str:
-    return figures(plan_reads(wanted, limits).reads)
+    """The plan's reads and the exponent reads its bracketed values add (a point too far
+    from its scale factor for one read: bridge/core/bracket.py)."""
+    planned = plan_reads(wanted, limits)
+    return figures([*planned.reads, *planned.extra])
 
 
 def walked(registers: dict[int, int]) -> Chain:

@@ -43,6 +43,8 @@ the bridge started:
     modbus_device_counter_readings_held_total{device}   counter readings held back (a 0, a
                                                         torn read, jitter, a failed read)
     modbus_device_counter_resets_total{device}          counter decreases confirmed
+    modbus_device_scaled_values_held_total{device}      values read apart from their scale
+                                                        factor held: the factor changed
     modbus_device_exceptions_total{device,code}
     modbus_device_latency_seconds{device,quantile}      gauge, quantile 0.5 and 0.95;
                                                         absent before the first answer
@@ -104,6 +106,11 @@ _DEVICE_COUNTERS: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...]
         "counter_resets",
         "Counter decreases confirmed by readings in a row and published",
         attrgetter("counter_resets"),
+    ),
+    (
+        "scaled_values_held",
+        "Values read apart from their scale factor not published: the factor changed",
+        attrgetter("scaled_values_held"),
     ),
 )
 _DEVICE_GAUGES: tuple[tuple[str, str, Callable[[DeviceSnapshot], float]], ...] = (

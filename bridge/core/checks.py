@@ -286,8 +286,9 @@ def wide_keys(entities: AnyMapping[str, Entity]) -> list[str]:
 
 
 def _whole_reads(mapping: MappingParts) -> Iterator[str]:
-    """A 64-bit number where the device (or a segment) reads fewer than 4 registers; a
-    ``scale_by`` number and its exponent that one request cannot read together."""
+    """A 64-bit number where the device (or a segment) reads fewer than 4 registers (a
+    ``scale_by`` number and its exponent that one request cannot read together is no
+    error: the planner reads it bracketed, bridge/core/bracket.py)."""
     for key in wide_keys(mapping.entities):
         e = mapping.entities[key]
         limit = _read_limit(mapping, e, to_wire(e.address, mapping.protocol.addressing))
@@ -295,27 +296,6 @@ def _whole_reads(mapping: MappingParts) -> Iterator[str]:
             yield (
                 f"entities.{key}.type: a {e.data_type.value} is read whole, in one request of "
                 f"4 registers; the device reads at most {limit} there"
-            )
-    yield from _scaled_reads(mapping)
-
-
-def _scaled_reads(mapping: MappingParts) -> Iterator[str]:
-    rule = mapping.protocol.addressing
-    for key, e in mapping.entities.items():
-        source = mapping.entities.get(e.scale_by or "")
-        if source is None or not e.readable or source.table is not e.table:
-            continue
-        first, second = to_wire(e.address, rule), to_wire(source.address, rule)
-        start = min(first, second)
-        stop = max(first + e.register_count, second + source.register_count)
-        limit = min(_read_limit(mapping, e, first), _read_limit(mapping, e, second))
-        if stop - start > limit or _segment_index(mapping, e, first) != _segment_index(
-            mapping, e, second
-        ):
-            yield (
-                f"entities.{key}.scale_by: {e.scale_by!r} is read in the same request, "
-                f"{stop - start} registers from {start} (wire); the device reads at most "
-                f"{limit} there, within one segment"
             )
 
 
@@ -332,14 +312,6 @@ def _read_limit(mapping: MappingParts, e: Entity, wire: int) -> int:
             and to_wire(s.start, rule) <= wire <= to_wire(s.end, rule)
         ]
     )
-
-
-def _segment_index(mapping: MappingParts, e: Entity, wire: int) -> int:
-    rule = mapping.protocol.addressing
-    for index, s in enumerate(mapping.protocol.segments):
-        if s.table is e.table and to_wire(s.start, rule) <= wire <= to_wire(s.end, rule):
-            return index
-    return -1
 
 
 def _sentinels(mapping: MappingParts) -> Iterator[str]:

@@ -24,14 +24,24 @@ Not the published document (bridge/core/state.py): this is what it is built from
 
 from __future__ import annotations
 
+from collections import ChainMap
 from collections.abc import Iterable
 from datetime import datetime
 
-from bridge.core.codec import Value, decimals_of, decode
+from bridge.core.bracket import Bracket, Observation, Verdict, needs_after, verdict
+from bridge.core.codec import Image, Value, decimals_of, decode
 from bridge.core.counters import Kind, Reading, counters_of
 from bridge.core.guard import UNGUARDED, Guard
 from bridge.core.mapping import Mapping, Point, printed_address
-from bridge.core.planner import Address, ReadLimits, addresses_of, limits_for, plan_reads
+from bridge.core.planner import (
+    Address,
+    Plan,
+    ReadLimits,
+    addresses_of,
+    join_reads,
+    limits_for,
+    plan_reads,
+)
 from bridge.core.protocol import Protocol
 from bridge.core.refusal_memory import RefusalMemory
 from bridge.core.request import Read, Write
@@ -43,6 +53,7 @@ from bridge.errors import MissingDataError
 
 NO_LIMIT = 0x10000  # more registers than any read asks for
 _KEPT = 64  # key sets whose sharers are kept (due intervals' keys, a command's keys)
+_READINGS = 8  # readings of an exponent register kept (a pass reads it at most three times)
 DEFAULT_RULE = PollRule()
 
 
@@ -84,7 +95,15 @@ class DeviceState:
         self.max_read: int | None = None  # learnt: fewer registers per read than mapped
         self.rule = poll
         self.intervals = poll.intervals({k: p.entity for k, p in self.points.items()})
-        self._plans: dict[frozenset[float], tuple[tuple[Read, ...], tuple[str, ...]]] = {}
+        self._plans: dict[frozenset[float], tuple[Plan, tuple[str, ...]]] = {}
+        # the exponent registers' readings (request number, word), for bracketed values
+        self.readings: dict[Address, list[Observation]] = {
+            cell: []
+            for p in self.points.values()
+            if p.scale_source is not None
+            for cell in p.scale_source.addresses
+        }
+        self.scaled_values_held = 0  # bracketed values whose exponent changed as they were read
         self.published = frozenset(published(self.points))  # keys whose values go out
         self._limits: ReadLimits | None = None
         self._readers: dict[Address, tuple[str, ...]] | None = None
@@ -111,7 +130,12 @@ class DeviceState:
     def plan(self, due: Iterable[PollSpec]) -> tuple[Read, ...]:
         """The reads of the entities whose interval is due (``fast``/``slow``/``once`` or
         seconds), planned as one set: entities due together share reads."""
-        return self._planned(due)[0]
+        return self._planned(due)[0].reads
+
+    def brackets(self, due: Iterable[PollSpec]) -> tuple[Bracket, ...]:
+        """The values of ``plan(due)`` read apart from their exponent (bridge/core/
+        bracket.py): their exponent is read before and after them."""
+        return self._planned(due)[0].bracketed
 
     def keys_of(self, due: Iterable[PollSpec]) -> tuple[str, ...]:
         """The keys a pass over ``plan(due)`` decodes, in mapping order: those due, and
@@ -119,18 +143,18 @@ class DeviceState:
         the planner read through: their value is as fresh as the others')."""
         return self._planned(due)[1]
 
-    def _planned(self, due: Iterable[PollSpec]) -> tuple[tuple[Read, ...], tuple[str, ...]]:
+    def _planned(self, due: Iterable[PollSpec]) -> tuple[Plan, tuple[str, ...]]:
         chosen = frozenset(self.rule.seconds(spec) for spec in due)
         if chosen not in self._plans:
             members = [p for k, p in self.points.items() if self.intervals[k] in chosen]
-            reads = plan_reads(members, self.limits()).reads
-            covered = {(r.table, a) for r in reads for a in r.span}
+            plan = plan_reads(members, self.limits())
+            covered = {(r.table, a) for r in plan.reads for a in r.span}
             keys = tuple(
                 k
                 for k, p in self.points.items()
                 if self.intervals[k] in chosen or (p.entity.readable and p.footprint <= covered)
             )
-            self._plans[chosen] = (reads, keys)
+            self._plans[chosen] = (plan, keys)
         return self._plans[chosen]
 
     def readers_of(self, cells: Iterable[Address]) -> tuple[str, ...]:
@@ -161,7 +185,11 @@ class DeviceState:
 
     def reads_for(self, points: Iterable[Point]) -> tuple[Read, ...]:
         """The reads of these points (not kept: a read on request, a read back)."""
-        return plan_reads(list(points), self.limits()).reads
+        return self.plan_for(points).reads
+
+    def plan_for(self, points: Iterable[Point]) -> Plan:
+        """The plan of these points, with its brackets (not kept)."""
+        return plan_reads(list(points), self.limits())
 
     def forget_plans(self) -> None:
         self._plans.clear()
@@ -174,9 +202,13 @@ class DeviceState:
         addresses it had refused before (now readable: the plans are made again)."""
         self.requests += 1
         for address, value in zip(read.span, values, strict=True):
-            self.image[(read.table, address)] = value
-            self.request_of[(read.table, address)] = self.requests
-            fresh.add((read.table, address))
+            cell = (read.table, address)
+            self.image[cell] = value
+            self.request_of[cell] = self.requests
+            fresh.add(cell)
+            if cell in self.readings:  # an exponent: its last readings, for bracketed values
+                seen = self.readings[cell][1 - _READINGS :]
+                self.readings[cell] = [*seen, (self.requests, value)]
         back = self.refusals.answer(addresses_of(read))
         if back:
             self.forget_plans()
@@ -196,11 +228,15 @@ class DeviceState:
         for cell in cells:
             self.read_at[cell] = now
 
-    def decode_fresh(self, keys: Iterable[str], fresh: set[Address]) -> frozenset[str]:
+    def decode_fresh(
+        self, keys: Iterable[str], fresh: set[Address], since: int | None = None
+    ) -> frozenset[str]:
         """Decode the readable ``keys`` whose registers are all in ``fresh`` (refused ones
         become None); return the keys whose value changed. The others keep their value.
         A ``scale_by`` value needs its exponent's register fresh too, read in the same
-        request (the planner never reads them apart): never with another read's exponent."""
+        request, or read bracketed in the pass whose requests are numbered after ``since``
+        (the exponent read the same before and after the value: ``_bracketed``): never with
+        another moment's exponent."""
         changed: set[str] = set()
         refused = self.refusals.refused
         for key in keys:
@@ -208,13 +244,17 @@ class DeviceState:
             if not point.entity.readable:
                 continue
             span = point.footprint
+            image: Image = self.image
             if not span.isdisjoint(refused):
                 value: Value = None
             elif span <= fresh:
-                if point.scale_source is not None and not self._one_request(point):
-                    continue
+                if point.scale_source is not None:
+                    found = self._scaled_image(point, point.scale_source, since)
+                    if found is None:
+                        continue
+                    image = found
                 try:
-                    value = decode(point, self.image)
+                    value = decode(point, image)
                 except MissingDataError:
                     value = None
             else:
@@ -225,16 +265,61 @@ class DeviceState:
                     self.counter_news.append((key, reading))
                 if not reading.published:
                     continue  # held: the published value stays
-                value = _counted(value, reading, decimals_of(point, self.image))
+                value = _counted(value, reading, decimals_of(point, image))
             if key not in self.values or self.values[key] != value:
                 changed.add(key)
             self.values[key] = value
         return frozenset(changed)
 
-    def _one_request(self, point: Point) -> bool:
-        """Every word of the point and its exponent came in one request."""
-        requests = {self.request_of.get(cell) for cell in point.footprint}
-        return len(requests) == 1 and None not in requests
+    def _scaled_image(self, point: Point, source: Point, since: int | None) -> Image | None:
+        """The image to decode a ``scale_by`` value with: its exponent (``source``, one
+        register) as read in the request of its words, or, read apart (bracketed), as read
+        before and after them in requests after ``since``, every reading the same; None
+        when neither (a changed exponent is counted: ``scaled_values_held``)."""
+        cell = (source.table, source.address)
+        requests = {self.request_of.get(c) for c in point.addresses}
+        if None in requests:
+            return None
+        readings = self.readings.get(cell, [])
+        if len(requests) == 1:  # its exponent in the same request (a later read may differ)
+            (number,) = requests
+            word = next((w for n, w in readings if n == number), None)
+            if word is not None:
+                return self._with(cell, word)
+        if since is None:
+            return None
+        numbers = {n for n in requests if n is not None}
+        bracket = [r for r in readings if r[0] > since]
+        found = verdict(bracket, numbers)
+        if found is Verdict.CHANGED:
+            self.scaled_values_held += 1
+        if found is not Verdict.SAME:
+            return None
+        return self._with(cell, next(w for n, w in reversed(bracket) if n < min(numbers)))
+
+    def _with(self, cell: Address, word: int) -> Image:
+        """The image with ``cell`` as ``word`` (the image itself when it holds it)."""
+        if self.image.get(cell) == word:
+            return self.image
+        return ChainMap({cell: word}, self.image)
+
+    def unconfirmed(self, brackets: Iterable[Bracket], since: int) -> tuple[Read, ...]:
+        """The exponent reads still to send after a pass (requests after ``since``): those
+        with no reading after the last word of a value they bracket that the pass read."""
+        reads: list[Read] = []
+        for bracket in brackets:
+            cell = (bracket.exponent.table, bracket.exponent.address)
+            cells = {c for k in bracket.keys for c in self.points[k].addresses}
+            requests = {n for c in cells if (n := self.request_of.get(c, 0)) > since}
+            readings = [r for r in self.readings.get(cell, ()) if r[0] > since]
+            if requests and needs_after(readings, requests):
+                reads.append(bracket.exponent)
+        return join_reads(reads, self.limits())
+
+    def exponents_before(self, brackets: Iterable[Bracket]) -> tuple[Read, ...]:
+        """The exponent reads to send before a pass: those whose plan read follows a
+        value's (joined where they lie side by side)."""
+        return join_reads((b.exponent for b in brackets if b.before), self.limits())
 
     # --- counters ------------------------------------------------------------------------
 

@@ -53,7 +53,10 @@ A counter lower than before (a device rebuilt with fresh counters) counts from z
                                          (published as code_<n>), counted as they appear
           "counter_readings_held": 0,  counter readings below the published value (a 0,
                                          a torn read, jitter) or failed, not published
-          "counter_resets": 0          counter decreases confirmed and published
+          "counter_resets": 0,         counter decreases confirmed and published
+          "scaled_values_held": 0      values read apart from their scale factor not
+                                         published: the factor read differently before
+                                         and after them (it changed as they were read)
         }
       }
     }
@@ -115,6 +118,7 @@ class DeviceSnapshot:
     unknown_codes: int = 0
     counter_readings_held: int = 0
     counter_resets: int = 0
+    scaled_values_held: int = 0
     error: str | None = None  # offline with a reason: a failed SunSpec walk, a lock
 
     @property
@@ -228,6 +232,7 @@ def _device_report(device: DeviceSnapshot, snapshot: Snapshot) -> dict[str, Any]
         "unknown_codes": device.unknown_codes,
         "counter_readings_held": device.counter_readings_held,
         "counter_resets": device.counter_resets,
+        "scaled_values_held": device.scaled_values_held,
     }
 
 

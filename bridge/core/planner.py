@@ -13,10 +13,25 @@ it is longer than that max (Nastec: one register per read): it is then cut into 
 registers that group like any other atoms, which reads it in limit-sized chunks from its
 first register (the 6-register Nastec MAC address takes six reads). A 64-bit number is
 never cut (no tear check joins four words): where reads are shorter (a limit learnt from
-the device) it is left out, named in ``Plan.unplannable``. Nor is a ``scale_by`` number
-ever read apart from its exponent register: its atom runs from the first to the last
-register of the two (``Point.extent``), so a value is never scaled by another read's
-exponent; where no read can hold both it is left out and named the same way.
+the device) it is left out, named in ``Plan.unplannable``.
+
+A ``scale_by`` number is read with its exponent register wherever one read can hold both:
+its atom runs from the first to the last register of the two (``Point.extent``), so the
+value is scaled by the exponent of its own request. Where no read can (the two farther
+apart than the max count, a segment boundary, an unreadable register or, without
+readable gaps, an undefined one between them: SunSpec model 129's third and fourth
+curves, the 7xx DER curves), it is read *bracketed* (bridge/core/bracket.py): its atom is
+its own registers, its exponent is planned as a point of its own (due or not), and
+``Plan.bracketed`` holds one ``Bracket`` per exponent with every far value it scales. A
+pass reads the exponent before the values and again after them (the plan's own read of
+it serves the side it lies on; the other gets a dedicated one-register read, shared by
+every value of that exponent, and joined with its neighbours' (``join_reads``: SunSpec's
+factors lie side by side): ``Plan.extra``, counted by ``cost_of``), and the device
+state decodes a value only when every reading of its exponent from before to after is
+the same (bridge/core/device_state.py); else it keeps its last value that pass, counted
+in health as ``scaled_values_held``. Where atoms of values near their exponents overlap
+into one longer than a read, the value farthest from its exponent is bracketed, until
+they fit. Only a value whose exponent register cannot be read at all is left out.
 
 ``plan_reads`` is exact: dynamic programming over the sorted atoms of each table (blocks
 are contiguous runs of atoms; reading an atom twice never pays). A hole is read through
@@ -51,10 +66,11 @@ and then plans again with ``limits_for(mapping, refused=remembered)``.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Collection, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 from bridge.core.address import Addressing, to_wire
+from bridge.core.bracket import Bracket, brackets_of
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping, Point
 from bridge.core.protocol import Reserved
@@ -99,10 +115,13 @@ class ReadLimits:
 
 @dataclass(frozen=True, slots=True)
 class Plan:
-    """Reads sorted by (table, address), and the keys of points no read can fetch."""
+    """Reads sorted by (table, address), the keys of points no read can fetch, and the
+    ``scale_by`` values read apart from their exponent (bridge/core/bracket.py)."""
 
     reads: tuple[Read, ...]
     unplannable: tuple[str, ...] = ()
+    bracketed: tuple[Bracket, ...] = ()
+    extra: tuple[Read, ...] = ()  # the dedicated exponent reads the brackets add to a pass
 
 
 def limits_for(
@@ -191,24 +210,62 @@ def plan_reads(points: Iterable[Point], limits: ReadLimits) -> Plan:
     defined = limits.defined | {(p.table, a) for p in readable for a in p.span}
     reads: list[Read] = []
     unplannable: set[str] = set()
+    brackets: list[Bracket] = []
     for table in sorted({p.table for p in readable}):
-        units, lost = _units(table, [p for p in readable if p.table is table], limits, defined)
+        mine = [p for p in readable if p.table is table]
+        units, lost, far = _units(table, mine, limits, defined)
         unplannable |= lost
-        reads += _plan_table(table, units, limits, defined)
-    return Plan(tuple(reads), tuple(sorted(unplannable)))
+        planned = _plan_table(table, units, limits, defined)
+        reads += planned
+        brackets += brackets_of(_far_values(mine, far), planned)
+    before = join_reads([b.exponent for b in brackets if b.before], limits)
+    after = join_reads([b.exponent for b in brackets if b.after], limits)
+    return Plan(tuple(reads), tuple(sorted(unplannable)), tuple(brackets), before + after)
+
+
+def join_reads(reads: Iterable[Read], limits: ReadLimits) -> tuple[Read, ...]:
+    """Exponent reads of registers next to each other as one read (SunSpec's factors lie
+    side by side), within the max count and a segment; sorted."""
+    joined: list[Read] = []
+    for read in sorted(set(reads), key=lambda r: (r.table, r.address)):
+        last = joined[-1] if joined else None
+        if last is not None and last.table is read.table and last.span.stop == read.address:
+            both = Read(read.table, last.address, last.count + read.count)
+            place = _region(both.table, both.address, both.span.stop, limits)
+            if place is not None and both.count <= place[1]:
+                joined[-1] = both
+                continue
+        joined.append(read)
+    return tuple(joined)
+
+
+def _far_values(points: Sequence[Point], far: set[str]) -> Iterator[tuple[str, Table, range, int]]:
+    for p in points:
+        if p.key in far and p.scale_source is not None:
+            yield p.key, p.table, p.span, p.scale_source.address
 
 
 def _units(
     table: Table, points: Sequence[Point], limits: ReadLimits, defined: frozenset[Address]
-) -> tuple[list[_Unit], set[str]]:
-    """The DP units of one table's points, and the keys of points no read can fetch."""
+) -> tuple[list[_Unit], set[str], set[str]]:
+    """The DP units of one table's points, the keys of points no read can fetch, and the
+    keys of ``scale_by`` values read apart from their exponent (bracketed)."""
     lost = {p.key for p in points if any((table, a) in limits.unreadable for a in p.span)}
     lost |= {p.key for p in points if _wide(p) and _too_long(table, p, limits)}
-    lost |= {p.key for p in points if not _scaled_readable(table, p, limits, defined)}
+    far = {p.key for p in points if not _scaled_readable(table, p, limits, defined)}
+    lost |= {
+        p.key
+        for p in points
+        if p.key in far
+        and p.scale_source is not None
+        and not _exponent_readable(table, p.scale_source, limits)
+    }
+    far -= lost
     while True:
         units: list[_Unit] = []
         cut: set[str] = set()
-        for start, stop, keys in _atoms(p for p in points if p.key not in lost):
+        kept = [p for p in points if p.key not in lost]
+        for start, stop, keys in _atoms([*kept, *_exponents(kept, far)], far):
             place = _region(table, start, stop, limits)
             if place is None:
                 cut.update(keys)
@@ -218,12 +275,26 @@ def _units(
                 units.append(_Unit(start, stop, region, limit))
                 continue
             whole = [p for p in points if p.key in keys and p.scale_source is not None]
-            if whole:  # a value and its exponent are never read apart: the farthest left out
-                lost.add(max(whole, key=lambda p: (len(p.extent), p.key)).key)
+            whole = [p for p in whole if p.key not in far]
+            if whole:  # a value too far to be read with its exponent: read bracketed
+                far.add(max(whole, key=lambda p: (len(p.extent), p.key)).key)
                 break
             units += [_Unit(a, a + 1, region, limit) for a in range(start, stop)]
         else:
-            return units, lost | cut
+            return units, lost | cut, far - cut
+
+
+def _exponents(points: Sequence[Point], far: set[str]) -> list[Point]:
+    """The exponents of the bracketed values: read by the plan, due or not."""
+    found = {p.scale_source.key: p.scale_source for p in points if p.key in far and p.scale_source}
+    own = {p.key for p in points}
+    return [p for k, p in sorted(found.items()) if k not in own]
+
+
+def _exponent_readable(table: Table, source: Point, limits: ReadLimits) -> bool:
+    """A bracketed value's exponent register can be read on its own (one register: it
+    fits any read and crosses no segment boundary)."""
+    return all((table, a) not in limits.unreadable for a in source.span)
 
 
 def _scaled_readable(
@@ -252,12 +323,19 @@ def _too_long(table: Table, point: Point, limits: ReadLimits) -> bool:
     return place is not None and place[1] < point.count
 
 
-def _atoms(points: Iterable[Point]) -> list[tuple[int, int, tuple[str, ...]]]:
+def _atoms(
+    points: Iterable[Point], far: Collection[str] = ()
+) -> list[tuple[int, int, tuple[str, ...]]]:
     """Points of one table merged where they share a register: (start, stop, keys). A
-    ``scale_by`` point spans its exponent's register too (``Point.extent``): read whole."""
+    ``scale_by`` point spans its exponent's register too (``Point.extent``): read whole;
+    unless it is read bracketed (``far``): its own registers then."""
+
+    def reach(p: Point) -> range:
+        return p.span if p.key in far else p.extent
+
     atoms: list[tuple[int, int, tuple[str, ...]]] = []
-    for p in sorted(points, key=lambda p: (p.extent.start, len(p.extent), p.key)):
-        start, stop = p.extent.start, p.extent.stop
+    for p in sorted(points, key=lambda p: (reach(p).start, len(reach(p)), p.key)):
+        start, stop = reach(p).start, reach(p).stop
         if atoms and start < atoms[-1][1]:
             first, last, keys = atoms[-1]
             atoms[-1] = (first, max(last, stop), (*keys, p.key))
@@ -345,8 +423,9 @@ def _hole_readable(
 
 
 def cost_of(plan: Plan | Iterable[Read], timing: LinkTiming) -> float:
-    """Seconds of bus time for one pass over the reads."""
-    reads = plan.reads if isinstance(plan, Plan) else plan
+    """Seconds of bus time for one pass over the reads (a plan's: its brackets' dedicated
+    exponent reads too)."""
+    reads = (*plan.reads, *plan.extra) if isinstance(plan, Plan) else plan
     return sum(timing.read_cost(read) for read in reads)
 
 
@@ -396,7 +475,9 @@ def split_read(read: Read, points: Iterable[Point], *, halves: bool = False) -> 
         and p.address < end
         and read.address < p.address + p.count
     ]
-    atoms = [(max(a, read.address), min(b, end)) for a, b, _ in _atoms(inside)]
+    # a value whose exponent lies outside the read was read bracketed: its own registers
+    apart = {p.key for p in inside if p.extent.start < read.address or p.extent.stop > end}
+    atoms = [(max(a, read.address), min(b, end)) for a, b, _ in _atoms(inside, apart)]
     if len(atoms) <= 1:
         return ()
     if halves:

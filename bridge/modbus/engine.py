@@ -211,5 +211,6 @@ def device_snapshot(poller: DevicePoller) -> DeviceSnapshot:
         unknown_codes=poller.unknown_codes,
         counter_readings_held=poller.counter_readings_held,
         counter_resets=poller.counter_resets,
+        scaled_values_held=poller.scaled_values_held,
         error=health.lock_reason if health.fault in _WITH_REASON and not health.online else None,
     )

@@ -11,7 +11,9 @@ to its bus (``DeviceLink``, bridge/modbus/device_link.py: submit, read a block, 
 and passing the values they changed to ``values_changed``: writes go through its
 ``DeviceWriter`` (bridge/modbus/writer.py), blocks the device refuses are searched and
 learnt by its ``RefusalLearner`` (bridge/modbus/refusal_learning.py), two-word values read
-in two reads are checked by ``check_torn`` (bridge/modbus/tear_check.py), and a device
+in two reads are checked by ``check_torn`` (bridge/modbus/tear_check.py), values read
+apart from their scale factor get it read before and after them (bridge/modbus/
+bracket_read.py), and a device
 with a communication watchdog is kept fed by ``keep_alive`` (bridge/modbus/keepalive.py).
 None of them imports the poller.
 """
@@ -38,6 +40,7 @@ from bridge.core.protocol import Protocol
 from bridge.core.request import Read
 from bridge.core.schedule import ONCE, PollRule, PollSpec, Schedule
 from bridge.core.timing import LinkTiming
+from bridge.modbus.bracket_read import read_after, read_before
 from bridge.modbus.device_link import DeviceLink, Refused
 from bridge.modbus.keepalive import keep_alive
 from bridge.modbus.refusal_learning import RefusalLearner
@@ -159,6 +162,12 @@ class DevicePoller:
     def health(self) -> DeviceHealth:
         return self.link.health
 
+    @property
+    def scaled_values_held(self) -> int:
+        """Values read apart from their scale factor not published: the factor read
+        differently before and after them (bridge/core/bracket.py)."""
+        return self.state.scaled_values_held
+
     # --- polling ------------------------------------------------------------------
 
     @property
@@ -231,13 +240,17 @@ class DevicePoller:
         chosen = frozenset(map(self.state.rule.seconds, due))
         self.learner.recheck()
         fresh: set[Address] = set()
-        plan = self.state.plan(chosen)
+        plan, brackets = self.state.plan(chosen), self.state.brackets(chosen)
+        since = await read_before(self.state, self.link, brackets, Priority.POLL, fresh)
         await self._read_pass(plan, Priority.POLL, fresh, stop=True)
         if ONCE in chosen and fresh:
             self._polled_once = True
+        await read_after(
+            self.state, self.link, brackets, since, priority=Priority.POLL, fresh=fresh
+        )
         keys = self.state.sharing(self.state.keys_of(chosen))  # and their registers' views
         await check_torn(self.state, self.link, keys, plan, fresh)
-        self._decode(keys, fresh)
+        self._decode(keys, fresh, since)
         if not self.first_poll_done and self._every_interval() <= chosen:
             self.first_poll_done = True  # units and limits read (or not there): say so once
             self._notify(frozenset())
@@ -250,10 +263,14 @@ class DevicePoller:
         """Read these points (all when None) ahead of the polls; return their values."""
         wanted = [self.points[k] for k in keys] if keys is not None else list(self.points.values())
         fresh: set[Address] = set()
-        reads = self.state.reads_for(wanted)
-        await self._read_pass(reads, Priority.READ_NOW, fresh)
-        await check_torn(self.state, self.link, [p.key for p in wanted], reads, fresh)
-        self._decode(self.state.sharing(p.key for p in wanted), fresh)
+        plan = self.state.plan_for(wanted)
+        since = await read_before(self.state, self.link, plan.bracketed, Priority.READ_NOW, fresh)
+        await self._read_pass(plan.reads, Priority.READ_NOW, fresh)
+        await read_after(
+            self.state, self.link, plan.bracketed, since, priority=Priority.READ_NOW, fresh=fresh
+        )
+        await check_torn(self.state, self.link, [p.key for p in wanted], plan.reads, fresh)
+        self._decode(self.state.sharing(p.key for p in wanted), fresh, since)
         return {p.key: self.values.get(p.key) for p in wanted}
 
     async def _read_pass(
@@ -277,9 +294,10 @@ class DevicePoller:
         """A block refused outside a pass (a write's read, a keepalive read), judged alone."""
         return await self.learner.judge(refused, priority, fresh)
 
-    def _decode(self, keys: Iterable[str], fresh: set[Address]) -> None:
-        """Decode what this pass read fresh; pass on what changed."""
-        changed = self.state.decode_fresh(keys, fresh)
+    def _decode(self, keys: Iterable[str], fresh: set[Address], since: int) -> None:
+        """Decode what this pass (its requests after ``since``) read fresh; pass on what
+        changed."""
+        changed = self.state.decode_fresh(keys, fresh, since)
         if changed:
             self.values_changed(changed)
         else:

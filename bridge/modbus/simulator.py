@@ -93,7 +93,7 @@ from bridge.core.simulation_counter import (
     fault_reads,
 )
 from bridge.modbus.frame import CoilWordRequest
-from bridge.modbus.sunspec_unit import ImageDevice, SunSpecUnit
+from bridge.modbus.sunspec_unit import AfterRead, ImageDevice, SunSpecUnit
 from bridge.sunspec.image import DeviceImage
 
 __all__ = ["Quirks", "SimulatedUnit", "Simulator", "SunSpecUnit", "two_byte_count_frame"]
@@ -458,6 +458,12 @@ class Simulator:
     def set_registers(self, unit: int, values: dict[int, int]) -> None:
         """Store holding registers ``{address: word}`` of the SunSpec unit ``unit``."""
         self._image_device(unit).set_registers(values)
+
+    def after_read(self, unit: int, hook: AfterRead) -> None:
+        """Once the SunSpec unit ``unit`` answered a read, ``hook(address, count)`` gives the
+        registers ``{address: word}`` that change before its next request (a device whose
+        values move between two requests of one poll)."""
+        self._image_device(unit).after_read.append(hook)
 
     def _image_device(self, unit: int) -> ImageDevice:
         try:

@@ -4,12 +4,15 @@
 within the image (the ``SunS`` marker, its models, the end marker); any read that leaves
 the image is refused with 02 (illegal data address) as a real device refuses it, and every
 other function code with 01. It takes no writes and nothing moves on its own; a test
-changes registers with ``Simulator.set_registers`` (an energy counter, an event bit).
+changes registers with ``Simulator.set_registers`` (an energy counter, an event bit), or
+with ``Simulator.after_read`` once a read was answered (a scale factor that moves between
+two requests of one poll).
 """
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from pymodbus.constants import ExcCodes
@@ -20,6 +23,8 @@ from bridge.sunspec.image import DeviceImage
 
 _READ_HOLDING = 3
 Request = tuple[int, int, int]  # unit, function code, address
+# called with (address, count) of each read answered: the registers to change after it
+AfterRead = Callable[[int, int], dict[int, int]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,6 +43,7 @@ class ImageDevice:
     requests: deque[Request] = field(default_factory=deque)
     quirks: Quirks = field(default_factory=Quirks)  # none: a SunSpec unit has no quirks
     words: list[int] = field(default_factory=list)  # the image's registers, as they are now
+    after_read: list[AfterRead] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.words = list(self.spec.image.words)
@@ -85,4 +91,6 @@ class ImageDevice:
             return ExcCodes.ILLEGAL_ADDRESS
         for offset in range(count):
             registers[address - start + offset] = self.words[first + offset]
+        for hook in self.after_read:  # the answer is taken: what changes after it
+            self.set_registers(hook(address, count))
         return None

@@ -44,6 +44,7 @@ from bridge.errors import (
     ValueRejectedError,
     WriteForbiddenError,
 )
+from bridge.modbus.bracket_read import read_after, read_before
 from bridge.modbus.device_link import Changes, Link
 from bridge.modbus.scheduler import Priority
 
@@ -431,14 +432,22 @@ class DeviceWriter:
         return self.state.values.get(point.key)
 
     async def _read_back_keys(self, targets: list[Point], fresh: set[Address]) -> None:
-        for read in self.state.reads_for(targets):
+        """Read ``targets`` unless this command read them already (a value read apart from
+        its exponent with the exponent before and after it: bridge/modbus/bracket_read.py)."""
+        plan = self.state.plan_for(targets)
+        since = await read_before(self.state, self.link, plan.bracketed, Priority.WRITE, fresh)
+        for read in plan.reads:
             if not {(read.table, a) for a in read.span} <= fresh:
                 await self.link.read_block(read, Priority.WRITE, fresh)
-        self._decode(self.state.sharing(p.key for p in targets), fresh)
+        await read_after(
+            self.state, self.link, plan.bracketed, since, priority=Priority.WRITE, fresh=fresh
+        )
+        self._decode(self.state.sharing(p.key for p in targets), fresh, since)
 
-    def _decode(self, keys: Iterable[str], fresh: set[Address]) -> None:
-        """Decode what was read or acknowledged fresh; pass on what changed."""
-        changed = self.state.decode_fresh(keys, fresh)
+    def _decode(self, keys: Iterable[str], fresh: set[Address], since: int | None = None) -> None:
+        """Decode what was read or acknowledged fresh (a bracketed value: read after
+        ``since``); pass on what changed."""
+        changed = self.state.decode_fresh(keys, fresh, since)
         if changed:
             self.on_change(changed)
 

@@ -144,20 +144,14 @@ def point_entities(context: ModelContext, placed: PlacedPoint) -> tuple[Built, s
 
 
 def _number(context: ModelContext, placed: PlacedPoint, entity: dict[str, Any]) -> str:
-    """A number's scale, unit and classes; the reason when it cannot be read with its
-    scale factor in one request."""
+    """A number's scale, unit and classes (the reason when it is left out: none now; a
+    point too far from its scale factor for one read is read bracketed, bridge/core/
+    bracket.py)."""
     point = placed.point
     factor = scale_factor(placed, context.placed)
     if isinstance(factor, int):
         entity["scale"] = 10.0**factor
     elif factor is not None:
-        first = min(placed.offset, factor.offset)
-        last = max(placed.offset + point.size, factor.offset + factor.point.size)
-        if last - first > context.read_limit:
-            return (
-                f"it and its scale factor {factor.point.name} span {last - first} registers, "
-                f"more than one read of {context.read_limit}"
-            )
         entity["scale_by"] = context.key(factor)
     counter = point.type in _ACCUMULATORS or (
         point.name.startswith("Tot") and point.units.strip().lower() in ("wh", "varh", "vah")

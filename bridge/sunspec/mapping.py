@@ -140,7 +140,7 @@ def build_mapping(
             reason = f"none of its points (L {model.length}) is an entity"
             found.skipped.append(Skipped(model.id, model.address, "", reason))
     for key in _unplannable(_header(chain, found.entities, read_limit)):
-        found.drop(key, f"no read of {read_limit} registers holds it with its scale factor")
+        found.drop(key, f"no read of {read_limit} registers can fetch it")
     document = _header(chain, found.entities, read_limit)
     status = next((k for k, s in found.sources.items() if _is_status(s, found.entities[k])), None)
     if status is not None:
@@ -180,9 +180,9 @@ def _where(path: tuple[tuple[str, int], ...], name: str) -> str:
 
 
 def _unplannable(document: dict[str, Any]) -> tuple[str, ...]:
-    """The keys the planner cannot read: a value whose read with its scale factor
-    overlaps another's so that together they pass the read limit (the planner reads
-    overlapping pairs whole); the full set of entities is the most any poll reads."""
+    """The keys the planner cannot read (none from a walked image as the bundled models
+    lay out: a value too far from its scale factor is read bracketed, bridge/core/
+    bracket.py); the full set of entities is the most any poll reads."""
     if not document["entities"]:
         return ()
     mapping = Mapping.model_validate(document)

@@ -70,6 +70,7 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
         unknown_codes=5,
         counter_readings_held=6,
         counter_resets=1,
+        scaled_values_held=2,
     )
     current = _snapshot(1120.0, buses=(bus,), devices=(device,))
 
@@ -115,6 +116,7 @@ def test_whole_document_of_a_healthy_bus_and_device() -> None:
                 "unknown_codes": 5,
                 "counter_readings_held": 6,
                 "counter_resets": 1,
+                "scaled_values_held": 2,
             }
         },
     }

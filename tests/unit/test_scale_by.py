@@ -14,6 +14,7 @@ from pydantic import ValidationError
 from bridge.core.codec import decode, encode, scale_exponent
 from bridge.core.entity import Table
 from bridge.core.mapping import Mapping, Point, format_validation_errors, parse_mapping
+from bridge.core.planner import limits_for, plan_reads
 from bridge.core.request import Write
 from bridge.errors import MappingError, MissingDataError, ValueRejectedError
 from tests.factory import make_mapping
@@ -244,21 +245,20 @@ def test_scale_by_is_for_integer_numbers(fields: dict[str, Any], message: str) -
     assert any(message in row for row in errors_of(entities) if row.startswith("entities.v"))
 
 
-def test_a_value_and_its_exponent_beyond_one_read_is_a_mapping_error() -> None:
+def test_a_value_and_its_exponent_beyond_one_read_is_read_bracketed() -> None:
     entities = {"v": {"name": "Value", "address": 0, "scale_by": "sf"}, "sf": SF}
-    rows = errors_of(entities, protocol={"max_read_registers": 5})
-    assert rows == [
-        "entities.v.scale_by: 'sf' is read in the same request, 6 registers from 0 (wire); "
-        "the device reads at most 5 there, within one segment"
-    ]
-    make_mapping(entities, protocol={"max_read_registers": 6})  # fits: no error
+    mapping = make_mapping(entities, protocol={"max_read_registers": 5})  # no mapping error
+    plan = plan_reads(mapping.points().values(), limits_for(mapping))
+    assert plan.unplannable == ()
+    assert [(b.exponent.address, b.keys) for b in plan.bracketed] == [(5, ("v",))]
 
 
-def test_a_value_and_its_exponent_in_two_segments_is_a_mapping_error() -> None:
+def test_a_value_and_its_exponent_in_two_segments_is_read_bracketed() -> None:
     entities = {"v": {"name": "Value", "address": 0, "scale_by": "sf"}, "sf": SF}
     segments = [{"name": "a", "start": 0, "end": 3}, {"name": "b", "start": 4, "end": 9}]
-    rows = errors_of(entities, protocol={"segments": segments})
-    assert rows and rows[0].startswith("entities.v.scale_by: 'sf' is read in the same request")
+    mapping = make_mapping(entities, protocol={"segments": segments})
+    plan = plan_reads(mapping.points().values(), limits_for(mapping))
+    assert [b.keys for b in plan.bracketed] == [("v",)]
 
 
 def test_a_scale_by_missing_for_some_options_is_named() -> None:

@@ -9,6 +9,7 @@ from typing import Any
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bridge.core.bracket import Bracket
 from bridge.core.codec import decimals_of, decode
 from bridge.core.counters import CounterRule
 from bridge.core.device_state import DeviceState
@@ -65,25 +66,45 @@ def test_a_value_due_alone_reads_its_exponent_too() -> None:
     assert plan.reads == (Read(H, 50, 11),)
 
 
-def test_a_value_too_far_from_its_exponent_for_the_limit_is_unplannable() -> None:
+A_SF, W_SF = Read(H, 40, 1), Read(H, 60, 1)
+
+
+def test_a_value_too_far_from_its_exponent_for_the_limit_is_read_bracketed() -> None:
     plan = reads_of(inverter(), max_registers=30)  # 0..40 needs 41, 50..60 needs 11
-    assert plan.unplannable == ("a", "b", "c")
+    assert plan.unplannable == ()
+    # a, b, c are read before the plan's read of a_sf: a dedicated read of it goes first
+    assert plan.bracketed == (Bracket(A_SF, ("a", "b", "c"), before=True, after=False),)
     covered = {a for read in plan.reads for a in read.span}
-    assert {20, 40, 50, 60} <= covered
+    assert {0, 1, 2, 3, 20, 40, 50, 60} <= covered
     plan = reads_of(inverter(), max_registers=10)
-    assert plan.unplannable == ("a", "b", "c", "w")
+    assert plan.unplannable == ()
+    assert [(b.exponent, b.keys) for b in plan.bracketed] == [
+        (A_SF, ("a", "b", "c")),
+        (W_SF, ("w",)),
+    ]
 
 
-def test_an_unreadable_register_between_a_value_and_its_exponent_makes_it_unplannable() -> None:
+def test_an_unreadable_register_between_a_value_and_its_exponent_brackets_it() -> None:
     mapping = inverter()
     limits = limits_for(mapping, refused=frozenset({(H, 30)}))
     plan = plan_reads(mapping.points().values(), limits)
-    assert plan.unplannable == ("a", "b", "c")
+    assert plan.unplannable == ()
+    assert [b.keys for b in plan.bracketed] == [("a", "b", "c")]
+    assert all(30 not in read.span for read in plan.reads)
 
 
-def test_without_readable_gaps_a_hole_between_them_makes_it_unplannable() -> None:
+def test_an_unreadable_exponent_still_makes_its_far_values_unplannable() -> None:
+    mapping = inverter()
+    limits = limits_for(mapping, max_registers=30, refused=frozenset({(H, 40)}))
+    plan = plan_reads(mapping.points().values(), limits)
+    assert plan.unplannable == ("a", "a_sf", "b", "c")
+    assert plan.bracketed == ()
+
+
+def test_without_readable_gaps_a_hole_between_them_brackets_it() -> None:
     plan = reads_of(inverter(protocol={"readable_gaps": False}))
-    assert plan.unplannable == ("a", "b", "c", "w")
+    assert plan.unplannable == ()
+    assert [b.keys for b in plan.bracketed] == [("a", "b", "c"), ("w",)]
     dense = make_mapping(
         {
             "v": {"name": "V", "address": 0, "scale_by": "sf"},
@@ -102,9 +123,10 @@ def test_a_long_atom_holding_a_scaled_value_is_not_cut() -> None:
             "sf": {"name": "Scale", "address": 3, "type": "s16"},
         }
     )
-    plan = reads_of(mapping, max_registers=4)
-    assert plan.unplannable == ("v",)
-    assert sorted(a for read in plan.reads for a in read.span) == list(range(8))
+    plan = reads_of(mapping, max_registers=4)  # v is freed from sf, the text cut in 4s
+    assert plan.unplannable == ()
+    assert plan.reads == (Read(H, 0, 4), Read(H, 4, 4))
+    assert plan.bracketed == ()  # v and sf land in one read after all: read as any value
 
 
 def test_a_refused_block_is_split_never_between_a_value_and_its_exponent() -> None:
@@ -131,15 +153,16 @@ def test_every_planned_value_is_read_with_its_exponent(
     mapping = make_mapping(entities)
     points = mapping.points()
     plan = reads_of(mapping, max_registers=limit)
+    assert plan.unplannable == ()
     scaled = [p for p in points.values() if p.scale_source is not None]
-    for point in scaled:
+    bracketed = {key for b in plan.bracketed for key in b.keys}
+    assert all(b.exponent == Read(H, sf_address, 1) for b in plan.bracketed)
+    for point in scaled:  # with its exponent in one read, or bracketed: never both, never none
+        together = sum(holding(read, point) for read in plan.reads) == 1
+        assert together != (point.key in bracketed), point.key
         if len(point.extent) > limit:
-            assert point.key in plan.unplannable
-        elif point.key not in plan.unplannable:
-            assert sum(holding(read, point) for read in plan.reads) == 1
-    if any(len(p.extent) <= limit for p in scaled):  # one at least, each with the only sf read
-        assert len(plan.unplannable) < len(scaled)
-        assert sum(1 for r in plan.reads for a in r.span if a == sf_address) == 1
+            assert point.key in bracketed
+    assert sum(1 for r in plan.reads for a in r.span if a == sf_address) == 1
 
 
 # --- the device state -----------------------------------------------------------------------

@@ -218,17 +218,25 @@ def test_every_entity_is_planned_at_most_one_read_per_model(name: str) -> None:
     plan = plan_reads(mapping.points().values(), limits_for(mapping))
     assert plan.unplannable == ()
     assert all(r.function == 3 for r in plan.reads)
-    if name != "inverter_123":  # where no point is left out: the models' registers, in reads
-        assert len(plan.reads) <= sum(-(-(m.length + 2) // 125) for m in chain.models)
+    # the models' registers, in reads (a curve far from its factors: one exponent read more)
+    assert len(plan.reads) <= sum(-(-(m.length + 2) // 125) for m in chain.models)
+    assert all(not b.before and b.after for b in plan.bracketed)  # factors at a model's top
 
 
-def test_a_value_no_read_holds_with_its_scale_factor_is_left_out_with_the_reason() -> None:
-    built = built_device("inverter_123")  # model 129: 3 curves of 48 points, SFs at the top
-    far = [s for s in built.skipped if s.reason.startswith(("it and its scale factor", "no read"))]
-    assert far and all(s.model == 129 for s in far)
-    assert {s.point.split("/")[0] for s in far} == {"curve[3]", "curve[4]"}
+def test_a_value_no_read_holds_with_its_scale_factor_is_kept_and_read_bracketed() -> None:
+    built = built_device("inverter_123")  # model 129: four curves of 20 points, SFs at the top
+    assert not [s for s in built.skipped if "scale factor" in s.reason or "no read" in s.reason]
     kept = built.document["entities"]
-    assert "lvrt_curve_3_v10" in kept and "lvrt_curve_3_v12" not in kept
+    assert {"lvrt_curve_3_v10", "lvrt_curve_3_v12", "lvrt_curve_4_v20"} <= set(kept)
+    mapping = built.mapping()
+    plan = plan_reads(mapping.points().values(), limits_for(mapping))
+    bracketed = {key for b in plan.bracketed for key in b.keys}
+    assert "lvrt_curve_3_v12" in bracketed and "lvrt_curve_4_v20" in bracketed
+    assert "lvrt_curve_1_v1" not in bracketed  # near its factors: read with them
+    exponents = sorted(b.exponent.address for b in plan.bracketed)  # V_SF and Tms_SF
+    assert len(exponents) == len(plan.bracketed) == 2
+    # side by side: both read again in one read after the curves, the pass's one extra read
+    assert [(r.address, r.count) for r in plan.extra] == [(exponents[0], 2)]
 
 
 @pytest.mark.parametrize("limit", [4, 50, 125])
