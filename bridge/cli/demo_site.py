@@ -97,8 +97,12 @@ SITES = {
         "home",
         "a home: grid meter, hybrid inverter with battery, wallbox, heat pump",
         HOME,
-        (Command("wallbox", "current_limit", "10"),),
-        ("hybrid_inverter", "alarm_grid_loss"),
+        (
+            Command("wallbox", "current_limit_setpoint", "10"),
+            Command("hybrid_inverter", "work_mode", "zero_export_to_load"),
+            Command("heat_pump", "heating_offset", "2"),
+        ),
+        ("hybrid_inverter", "fault_f35_no_ac_grid"),
         "-a 1 -t 3:float -B -r 1 -c 3 -1",  # the grid meter's three phase voltages
     ),
 }

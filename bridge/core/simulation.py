@@ -347,6 +347,19 @@ class Rules:
     fixed_limit: bool  # a quirk set the read limit: segments' own limits do not apply
     failing_writes: frozenset[int] = frozenset()  # holding writes answered "device failure"
     toggles: tuple[tuple[int, Cell], ...] = ()  # toggle coil -> the state cell an ON flips
+    # (table, write address, read address, count): a set point written at one address and
+    # read back at another (ABB Terra AC: written at 4100h, applied at 4022h)
+    echoes: tuple[tuple[Table, int, int, int], ...] = ()
+
+    def echoed(self, write: Write) -> dict[Cell, int]:
+        """The read-back cells a write to a separate write address sets too."""
+        found: dict[Cell, int] = {}
+        for table, at, read, count in self.echoes:
+            if table is write.table and write.address <= at < write.address + len(write.values):
+                offset = at - write.address
+                words = write.values[offset : offset + count]
+                found |= {(table, read + i): int(word) for i, word in enumerate(words)}
+        return found
 
     def toggled(self, write: Write, image: Image) -> dict[Cell, int]:
         """What a toggle write changes (``toggle_of``: the breaker closes or opens)."""
@@ -445,6 +458,11 @@ def build_rules(mapping: Mapping, points: AnyMapping[str, Point], quirks: Quirks
             (p.write_address, (p.state_source.table, p.state_source.address))
             for p in writers
             if p.state_source is not None
+        ),
+        echoes=tuple(
+            (p.table, p.write_address, p.address, p.count)
+            for p in writers
+            if p.entity.readable and p.write_address != p.address and p.table is not Table.COIL
         ),
     )
 

@@ -236,6 +236,7 @@ class _Device:
                     self.image |= stored_cells(write)
                     self._take_password(write)
                 self.image |= self.rules.toggled(write, self.image)
+                self.image |= self.rules.echoed(write)
                 self.image |= follow(self.behaviour, write, self.image)  # start, stop, reset
                 self.image |= self.react(self.unit, write)
         return None if code is None else ExcCodes(code)

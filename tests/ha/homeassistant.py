@@ -15,6 +15,7 @@ the UTC offset to the time (``19:00:00.123+00:00``).
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import re
@@ -157,6 +158,20 @@ class HomeAssistant:
         self.write_configuration()
         self._launch()
         self._onboard()
+        asyncio.run(self._confirm_http_config())
+
+    async def _confirm_http_config(self) -> None:
+        """Confirm the HTTP config (our port) as working: 2026.11 tries a changed one for
+        five minutes, then reverts to the last confirmed (port 8123) and restarts. Older
+        versions have no such command, and nothing to confirm."""
+        socket = await self.websocket()
+        try:
+            await socket.call("http/config/promote")
+        except RuntimeError as refused:  # unknown command (older), or nothing pending
+            if "unknown_command" not in str(refused) and "promote" not in str(refused):
+                raise
+        finally:
+            await socket.close()
 
     def write_configuration(self) -> None:
         """configuration.yaml from the harness's own, ``integrations`` and ``extra_yaml``

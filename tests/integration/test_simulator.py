@@ -66,6 +66,7 @@ WRITE = {  # a readable setting per mapping and a value inside its limits
     "soft_starter": ("soft_start_time", 20),
     "vacon_nx": ("speed_reference", -25.5),
     "alfen_eve": ("current_limit_setpoint", 13.2),
+    "abb_terra_ac": ("current_limit_setpoint", 10),  # written at 4100h, read at 4022h
     "phoenix_contact_ev": ("current_limit_setpoint", 10),
 }
 
