@@ -23,6 +23,22 @@ from tests.library.cross_check import Comparison, compare  # noqa: E402
 from tests.library.sources import SOURCES  # noqa: E402
 
 REGENERATE = "python tools/library_doc.py > docs/library.md"
+CHOSEN = (
+    "**How the devices were chosen.** The kinds of device the people who run Home",
+    "Assistant and Node-RED own (a DIN-rail meter, a hybrid inverter with its battery, a",
+    "wallbox, a heat pump), and within each kind the models most projects already read:",
+    "every library device is read by at least two independent projects among evcc's",
+    "templates, volkszaehler/mbmd, openWB, OpenEMS, Victron's Modbus client and the",
+    "community Home Assistant integration with the most users for its vendor (the",
+    "*Sources compared* column), which is both the measure of how many people own it and",
+    "the evidence its mapping is checked against. The meters are the ones inverters ship",
+    "with or evcc users pick most (Eastron, Chint for Growatt, Huawei and SolaX, ABB,",
+    "Carlo Gavazzi for Victron, ORNO); the inverters the vendors with the largest",
+    "community integrations (Sungrow, Huawei, Growatt, Deye/Sunsynk, SolaX, GoodWe) and",
+    "the Victron GX; SunSpec inverters (SMA, Fronius, SolarEdge, Kostal...) need no",
+    "mapping here (`mapping: sunspec`). Install counts of community integrations were",
+    "not used: they could not be read from where the library was built.",
+)
 HEADERS = (
     "Model",
     "`mapping:`",
@@ -52,6 +68,8 @@ def render_library_doc(library: dict[str, Mapping] | None = None) -> str:
         "each *disagreement* is listed below its table with the choice made and why.",
         "*`identify`* says whether `modbus-mqtt-bridge identify` can name the model",
         "(a device code or ID string) or only say a unit answers like it.",
+        "",
+        *CHOSEN,
         "",
         _summary(mappings),
     ]
