@@ -15,6 +15,9 @@ runs) does one of two things:
   marker after ``NOT_SUNSPEC_RETRY``. Every request goes through the bus scheduler, so
   the walk of a dead unit delays no other device more than one poll of it would.
 
+Then it watches the device: one that was offline and answers again (a firmware update
+reboots it) has its chain walked again, as after a start, and rebuilt if it changed.
+
 ``rewalk(device_id)`` walks and builds now (``mapping/reload`` with ``rewalk``) and
 swaps the mapping in when it differs. A cache that cannot be written is logged; the
 device runs with the mapping built.
@@ -47,6 +50,7 @@ log = logging.getLogger(__name__)
 Swap = Callable[[str, Mapping], Awaitable[None]]
 NOT_SUNSPEC_RETRY = 600.0  # seconds before a unit without the marker is asked again
 FIRST_POLL_WAIT = 30.0  # seconds a cached device's chain check waits for its first poll
+WATCH = 1.0  # seconds between two looks at a device's availability (rebooted: walk again)
 BACKOFF_INITIAL, BACKOFF_MAX = 5.0, 300.0  # a failed walk, as an unreachable device
 
 
@@ -102,7 +106,34 @@ class SunSpecDevices:
         cached = cache.load(self.state_dir, device_id, *self._setting(poller))
         if poller.points and cached is not None:
             await self._check(device_id, cached.signature)
-            return
+        else:
+            await self._build(device_id)
+        await self._after_reboots(device_id)
+
+    async def _after_reboots(self, device_id: str) -> None:
+        """Walk the chain again whenever the device answers after being offline (a firmware
+        update reboots it); rebuilt if it changed. Ends when it is switched to a file."""
+        was_offline = False
+        while self.engine.device(device_id).device.is_sunspec:
+            poller = self.engine.device(device_id)
+            if poller.health.online is False:
+                was_offline = True
+            elif poller.health.online and was_offline:
+                was_offline = False
+                log.info(
+                    "%s: answers again; checking its SunSpec model chain (a firmware update "
+                    "changes it)",
+                    device_id,
+                )
+                cached = cache.load(self.state_dir, device_id, *self._setting(poller))
+                if cached is None:
+                    await self._build(device_id)
+                else:
+                    await self._check(device_id, cached.signature)
+            await asyncio.sleep(WATCH)
+
+    async def _build(self, device_id: str) -> None:
+        """Walk and build until it succeeds (the device offline with the reason meanwhile)."""
         delay = BACKOFF_INITIAL
         while self.engine.device(device_id).device.is_sunspec:  # not switched to a file
             try:

@@ -383,6 +383,10 @@ class Simulator:
     # --- test and CLI access ------------------------------------------------------------
 
     def set_quirks(self, unit: int, quirks: Quirks) -> None:
+        """The unit's quirks from now on (a SunSpec unit takes ``dead`` only)."""
+        if unit in self._images:
+            self._images[unit].quirks = Quirks(dead=quirks.dead)
+            return
         self._device(unit).set_quirks(quirks)
 
     def swap_image(self, unit: int, image: DeviceImage) -> None:

@@ -30,7 +30,7 @@ from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.errors import DeviceExceptionError
 from bridge.management import Management
 from bridge.modbus.engine import Engine
-from bridge.modbus.simulator import SimulatedUnit, Simulator, SunSpecUnit
+from bridge.modbus.simulator import Quirks, SimulatedUnit, Simulator, SunSpecUnit
 from bridge.sunspec.image import DeviceImage, build_image
 from bridge.sunspec.mapping import build_from_device
 from tests.integration.harness import (
@@ -197,6 +197,36 @@ async def test_a_changed_chain_is_rebuilt_and_cached_again(tmp_path: Path) -> No
     record = json.loads((tmp_path / "state/sunspec/inverter.json").read_text())
     assert record["signature"] != signature
     assert load_mapping(tmp_path / "state/sunspec/inverter.yaml") == again.mappings["inverter"]
+
+
+@pytest.mark.asyncio
+async def test_a_firmware_update_while_running_is_found_when_the_device_answers_again(
+    tmp_path: Path,
+) -> None:
+    """A firmware update reboots the device: silent a while, then another model chain.
+    When it answers again its chain is walked again and the new mapping built, swapped
+    in and cached, with no request from anyone; its values are pysunspec2's again."""
+    first, updated = image("inverter_123", 40000), image("inverter_mppt", 40000)
+    sim = Simulator([seed_unit(1), SunSpecUnit(2, first)], tick=0)
+    want = await expected(updated)
+    async with serving_tcp(sim) as port:
+        inverter = {"id": "inverter", "bus": "tcp", "unit": 2, "mapping": "sunspec", "poll": POLL}
+        loaded = site_config(tmp_path, [tcp_bus(port, timeout=0.3)], [SEED, inverter])
+        async with running(loaded) as (engine, management, _):
+            await eventually(lambda: engine.devices["inverter"].health.online is True, 20)
+            before = engine.devices["inverter"].mapping
+            walks = management.sunspec.walks
+            sim.set_quirks(2, Quirks(dead=True))  # rebooting
+            await eventually(lambda: engine.devices["inverter"].health.online is False, 20)
+            sim.swap_image(2, updated)
+            sim.set_quirks(2, Quirks())  # up again, with the new firmware
+            await eventually(lambda: engine.devices["inverter"].mapping != before, 20)
+            await eventually(lambda: all_read(engine, "inverter", want), 20)
+            assert differences(engine.devices["inverter"].values, want) == []
+            assert management.sunspec.walks > walks
+            assert engine.devices["starter"].health.online is True
+    cached = load_mapping(tmp_path / "state/sunspec/inverter.yaml")
+    assert cached == engine.devices["inverter"].mapping
 
 
 @pytest.mark.asyncio
