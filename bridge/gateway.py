@@ -10,7 +10,8 @@ bridge/core/gateway.py, and what a write's words mean bridge/core/gateway_writes
   on request; against the bridge's due polls the fair share decides, bridge/core/
   fair_share.py, so masters never starve the polls of a slow device), split into the
   device's read limits and joined as ``device/read`` does; a read still waiting for the
-  bus after ``max_wait`` (twice the bus timeout by default) answers 0x06 (busy) rather
+  bus after ``max_wait`` (by default twice the bus timeout, plus the device's own time
+  between requests) answers 0x06 (busy) rather
   than making its master wait on (0x0B when its unit rests after not answering);
   with ``max_age`` (the server's, or the device's ``gateway_max_age``) a read whose
   words the bridge read or wrote within that age is answered from its image without a
@@ -162,7 +163,9 @@ class Gateway:
         poller = self._device(route)
         scheduler = self.engine.schedulers[route.bus]
         bus_timeout = scheduler.transport.bus.timeout
-        wait = self.settings.max_wait or 2 * bus_timeout  # then 0x06, not a longer wait
+        pacing = poller.protocol.min_request_interval if poller is not None else 0.0
+        # then 0x06, not a longer wait; the device's own pacing is no busy bus
+        wait = self.settings.max_wait or 2 * bus_timeout + pacing
 
         def delayed() -> None:
             client.delayed += 1

@@ -362,8 +362,9 @@ class GatewayConfig(Strict):
         None,
         gt=0,
         description="seconds a master's request may wait for the bus before it answers "
-        "0x06 (busy) instead (default: twice the bus timeout: a transaction in flight may "
-        "take one, the silence after a timeout another)",
+        "0x06 (busy) instead (default: twice the bus timeout, a transaction in flight may "
+        "take one and the silence after a timeout another, plus the device's own "
+        "min_request_interval)",
     )
     idle_timeout: Duration = Field(
         120.0, gt=0, description="close a connection silent this long (or a half frame)"

@@ -217,7 +217,7 @@ async def test_nothing_fires_again_on_a_broker_restart(mosquitto: Broker, tmp_pa
 async def test_the_demo_fault_request_fires_the_event(mosquitto: Broker, tmp_path: Path) -> None:
     """What the demo's ``demo/fault`` does (bridge/cli/demo_control.py), end to end."""
     sim = alarm_sim()
-    handle = fault_request(sim, {"pump": PUMP})
+    handle = fault_request({"pump": (sim, PUMP)})
     async with observing(mosquitto, "modbus/#") as observer, bridged(mosquitto, sim, tmp_path):
         await online(observer, "pump")
         answer: Any = json.loads(await handle(b'{"device": "pump", "fault": "alarm_dry_running"}'))

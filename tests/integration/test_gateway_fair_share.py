@@ -84,8 +84,9 @@ async def test_two_masters_flooding_a_one_request_a_second_device_leave_the_poll
     # about one slot a second (the device's pacing), shared between polls and masters
     assert FLOOD * 0.7 <= slots <= FLOOD + 2, slots
     assert polls >= SHARE * slots - 1, f"the bridge polled {polls} of {slots} slots"
-    # the masters are served too: those of their requests a slot came for within max_wait
-    assert proxied >= 3, f"the masters got {proxied} of {slots} slots"
+    # the masters are served too: each request waits up to max_wait (2 x 0.5 s + the
+    # genset's 1 s), long enough to see two slots, one of which the share gives them
+    assert proxied >= 0.3 * slots, f"the masters got {proxied} of {slots} slots"
     every = [a for master in answers for a in master]
     assert every, "no answer"
     assert {tuple(a) if isinstance(a, list) else a for a in every} <= {tuple(expected), BUSY}

@@ -31,7 +31,7 @@ from bridge.modbus.simulator import SimulatedUnit, Simulator
 )
 def test_a_malformed_fault_request_is_answered_with_an_error(payload: bytes) -> None:
     simulator = Simulator([SimulatedUnit(1, load_mapping(builtin_mapping_path("nastec_vasco")))])
-    handle = fault_request(simulator, {"borehole_pump": 1})
+    handle = fault_request({"borehole_pump": (simulator, 1)})
     answer = json.loads(asyncio.run(handle(payload)))
     assert answer["status"] == "error" and answer["error"]
     assert simulator.faults(1) == []
@@ -39,7 +39,7 @@ def test_a_malformed_fault_request_is_answered_with_an_error(payload: bytes) -> 
 
 def test_a_counter_fault_request_makes_the_counter_misread() -> None:
     simulator = Simulator([SimulatedUnit(1, load_mapping(builtin_mapping_path("nastec_vasco")))])
-    handle = fault_request(simulator, {"borehole_pump": 1})
+    handle = fault_request({"borehole_pump": (simulator, 1)})
     payload = b'{"device": "borehole_pump", "counter": "motor_life", "fault": "reset"}'
     answer = json.loads(asyncio.run(handle(payload)))
     assert answer["status"] == "ok"

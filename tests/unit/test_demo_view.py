@@ -19,8 +19,9 @@ from bridge.core.simulation import initial_image
 def demo_bridge(**login: str) -> Bridge:
     """The demo's bridge, not running, its pollers holding what the simulator starts with."""
     options = {"username": None, "password_file": None, "password_env": None} | login
-    args = argparse.Namespace(base_topic="modbus", **options)
-    bridge = Bridge(demo_config(BrokerChoice("mqtt://127.0.0.1:1883", "local"), 5020, args))
+    args = argparse.Namespace(base_topic="modbus", site="seeds", **options)
+    where = {"demo": "127.0.0.1:5020"}
+    bridge = Bridge(demo_config(BrokerChoice("mqtt://127.0.0.1:1883", "local"), where, args))
     for poller in bridge.engine.devices.values():
         image = initial_image(poller.mapping, poller.points)
         poller.image.update(image)
