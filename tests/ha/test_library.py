@@ -32,14 +32,15 @@ import pytest
 from bridge.cli.demo import site_data
 from bridge.cli.demo_site import LAN_BUS, SERIAL_BUS, SITES, Command, SeedDevice
 from bridge.config import load_config_data
-from bridge.core.mapping import Mapping, shipped_library
+from bridge.core.mapping import Mapping, library_index, shipped_library
 from bridge.modbus.simulator import SimulatedUnit, Simulator
 from tests.ha.homeassistant import HomeAssistant, HomeAssistantSocket
 from tests.ha.test_alarm_triggers import until
 from tests.ha.test_counter_statistics import compiled, recording, waited
-from tests.ha.test_home_assistant import BASE, PREFIX, bridge_running, problems
+from tests.ha.test_home_assistant import BASE, PREFIX, bridge_running, discovered, problems
 from tests.integration.harness import serving_serial, serving_tcp
 from tests.integration.mosquitto import Broker
+from tests.integration.test_bridge import observing
 from tests.ports import free_port
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(1500)]
@@ -52,11 +53,11 @@ STEP = 60.0
 
 
 def library_devices() -> list[SeedDevice]:
-    """Every library mapping the home site does not already have, at units 1, 2, ..."""
+    """Every library mapping (mappings/library/; the seeds have tests of their own) the
+    home site does not already have, at units 1, 2, ..."""
     home = {d.mapping for d in HOME.devices}
-    names = [
-        name for name, m in sorted(shipped_library().items()) if m.library and name not in home
-    ]
+    index = library_index()
+    names = [n for n, path in index.items() if "library" in path.parts and n not in home]
     return [
         SeedDevice(name, name.replace("_", " ").title(), name, unit, LIBRARY_BUS)
         for unit, name in enumerate(names, start=1)
@@ -137,7 +138,6 @@ async def test_the_home_site_and_every_library_device_in_home_assistant(
     }
     library = shipped_library()
     every = [*HOME.devices, *others]
-    unique_ids = {f"{BASE}_{d.id}_{key}" for d in every for key in library[d.mapping].entities}
     counters = [
         f"{BASE}_{d.id}_{key}" for d in every for key in energy_counters(library[d.mapping])
     ]
@@ -154,7 +154,20 @@ async def test_the_home_site_and_every_library_device_in_home_assistant(
     ):
         where = {SERIAL_BUS: serial_end, LAN_BUS: f"127.0.0.1:{lan_port}"}
         where[LIBRARY_BUS] = f"127.0.0.1:{library_port}"
-        async with bridge_running(config(ha_broker, where, others, tmp_path / "state")):
+        async with (
+            observing(ha_broker, f"{PREFIX}/device/+/config") as observer,
+            bridge_running(config(ha_broker, where, others, tmp_path / "state")),
+        ):
+
+            async def published() -> str:
+                found = {topic.split("/")[2] for topic in observer.retained}
+                missing = {d.id for d in every} - found
+                return f"no discovery config for {sorted(missing)}" if missing else ""
+
+            await waited(published, STEP)
+            # what the bridge offers Home Assistant (secrets and guarded buttons are not)
+            unique_ids = set(discovered(observer))
+            assert set(counters) <= unique_ids, set(counters) - unique_ids
             ids: dict[str, str] = {}
 
             async def arrived() -> str:
