@@ -17,6 +17,7 @@ import asyncio
 import contextlib
 import socket
 import sys
+import tempfile
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,9 +33,10 @@ from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.errors import BridgeError, ConfigError, InputError, first_of
 from bridge.modbus.null_modem import null_modem
-from bridge.modbus.simulator import SimulatedUnit, Simulator
+from bridge.modbus.simulator import SimulatedUnit, Simulator, SunSpecUnit
 from bridge.mqtt import MqttConnectError
 from bridge.mqtt.broker import PROTOCOL, embedded_broker
+from bridge.sunspec.image import load_image
 
 DESCRIPTION = """\
 The five seed devices, simulated, on MQTT in seconds (no hardware needed).
@@ -52,6 +54,7 @@ LOOPBACK = "127.0.0.1"
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_WEB_PORT = 8099
 DEFAULT_GATEWAY_PORT = 5502
+SUNSPEC_IMAGES = Path(__file__).resolve().parent.parent / "sunspec"  # the demo's device images
 __all__ = ["SEEDS", "SeedDevice", "add_parser", "demo_config", "site_data"]
 
 
@@ -180,14 +183,14 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
     """Simulators, broker, bridge and view until cancelled."""
     site = SITES[args.site]
     simulators = {
-        bus: Simulator(
-            [SimulatedUnit(d.unit, load_mapping(builtin_mapping_path(d.mapping))) for d in devices],
-            tick=1.0,
-        )
+        bus: Simulator([simulated_unit(d) for d in devices], tick=1.0)
         for bus in site.buses
         if (devices := site.on(bus))
     }
-    with contextlib.ExitStack() as cables:  # closed after the simulators' tasks have ended
+    with (
+        contextlib.ExitStack() as cables,  # closed after the simulators' tasks have ended
+        tempfile.TemporaryDirectory(prefix="bridge-demo-") as state,  # the SunSpec cache
+    ):
         async with asyncio.TaskGroup() as group:
             where = _serve(simulators, group, cables, args.modbus_port)
             async with asyncio.timeout(10):
@@ -197,7 +200,16 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
                 if bus != SERIAL_BUS:
                     where[bus] = f"{LOOPBACK}:{simulator.port}"
             async with _broker(args.mqtt_url, args.local_broker, args.embedded_broker) as broker:
+                args.state_dir = state
                 await _run(site, simulators, where, broker, args=args, out=out)
+
+
+def simulated_unit(device: SeedDevice) -> SimulatedUnit | SunSpecUnit:
+    """A site's device as the simulator serves it: its shipped mapping, or its SunSpec
+    device image (bridge/sunspec/, laid out at 40000)."""
+    if device.image is not None:
+        return SunSpecUnit(device.unit, load_image(SUNSPEC_IMAGES / device.image))
+    return SimulatedUnit(device.unit, load_mapping(builtin_mapping_path(device.mapping)))
 
 
 def _serve(
@@ -326,8 +338,9 @@ def demo_config(
         "base_topic": args.base_topic,
         "client_id": f"modbus-mqtt-bridge-demo-{web_port}",
     } | {name: value for name, value in login.items() if value is not None}
+    state_dir = getattr(args, "state_dir", None)
     try:
-        return _site_config(site, mqtt, where, web_port, gateway_port)
+        return _site_config(site, mqtt, where, web_port, gateway_port, state_dir)
     except ConfigError as exc:
         raise InputError("demo", [_as_option(issue) for issue in exc.issues]) from None
 
@@ -357,10 +370,17 @@ def _bus(bus: str, where: str) -> dict[str, Any]:
     return {"id": bus, "transport": "tcp", "host": host, "tcp_port": int(port), "timeout": 0.5}
 
 
-def _site_config(
-    site: Site, mqtt: dict[str, Any], where: dict[str, str], web_port: int, gateway_port: int
+def _site_config(  # noqa: PLR0917 - the demo's own
+    site: Site,
+    mqtt: dict[str, Any],
+    where: dict[str, str],
+    web_port: int,
+    gateway_port: int,
+    state_dir: str | None,
 ) -> LoadedConfig:
     data = site_data(site, mqtt, where, web_port, gateway_port)
+    if state_dir is not None:
+        data["bridge"]["state_dir"] = state_dir
     return load_config_data(data, Path(f"demo-{site.name}.yaml"))
 
 

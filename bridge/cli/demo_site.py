@@ -5,7 +5,9 @@
 ``home``: a home from the device library. The grid meter, the hybrid inverter with its
 battery and the wallbox share one RS-485 line (a virtual cable, bridge/modbus/null_modem.py:
 RTU frames with real CRCs through a serial port, as a USB adapter gives them); the heat
-pump is on the LAN (Modbus TCP). The bridge's gateway serves the RS-485 units on a loopback
+pump and a SunSpec PV string inverter (``mapping: sunspec``: no mapping file, its model
+chain walked; served from bridge/sunspec/demo_inverter.json) are on the LAN (Modbus
+TCP). The bridge's gateway serves the RS-485 units on a loopback
 TCP port, so a second master (evcc, a PLC, ``mbpoll``) reads the meter without a second
 cable and without stealing the line from the bridge.
 """
@@ -32,6 +34,7 @@ class SeedDevice:
     # the devices are simulated, so the demo lets them: on a real site it is each
     # device's own ``allow_dangerous_writes``
     allow_dangerous: bool = False
+    image: str | None = None  # a SunSpec device image in bridge/sunspec/ (mapping: sunspec)
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +86,7 @@ HOME = (
     SeedDevice("hybrid_inverter", "Hybrid inverter", "deye_hybrid", 2, SERIAL_BUS, True),
     SeedDevice("wallbox", "Wallbox", "abb_terra_ac", 3, SERIAL_BUS, True),
     SeedDevice("heat_pump", "Heat pump", "nibe_s", 1, LAN_BUS, True),
+    SeedDevice("pv_inverter", "PV inverter", "sunspec", 2, LAN_BUS, image="demo_inverter.json"),
 )
 
 SITES = {
@@ -95,7 +99,7 @@ SITES = {
     ),
     "home": Site(
         "home",
-        "a home: grid meter, hybrid inverter with battery, wallbox, heat pump",
+        "a home: grid meter, hybrid inverter with battery, wallbox, heat pump, PV inverter",
         HOME,
         (
             Command("wallbox", "current_limit_setpoint", "10"),
