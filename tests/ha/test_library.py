@@ -65,11 +65,14 @@ def library_devices() -> list[SeedDevice]:
 
 
 def energy_counters(mapping: Mapping) -> list[str]:
-    """The keys of the mapping's energy counters (the energy dashboard's statistics)."""
+    """The keys of the mapping's energy counters (the energy dashboard's statistics), with
+    its default options (as the config gives none)."""
+    points = mapping.points(mapping.default_options())
     return [
         key
-        for key, entity in mapping.entities.items()
-        if entity.ha.device_class == "energy" and entity.ha.state_class == "total_increasing"
+        for key, point in points.items()
+        if point.entity.ha.device_class == "energy"
+        and point.entity.ha.state_class == "total_increasing"
     ]
 
 
