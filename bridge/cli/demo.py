@@ -26,7 +26,7 @@ from typing import Any, TextIO
 from bridge.app import Bridge
 from bridge.cli.demo_broker import find_mosquitto, private_mosquitto
 from bridge.cli.demo_control import FAULT_REQUEST, fault_request
-from bridge.cli.demo_site import SEEDS, SERIAL_BUS, SITES, SeedDevice, Site
+from bridge.cli.demo_site import LOOPBACK, SEEDS, SERIAL_BUS, SITES, SeedDevice, Site, site_data
 from bridge.cli.demo_view import DemoView, mosquitto_options, render_plain, render_table
 from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
 from bridge.config import LoadedConfig, MqttConfig, load_config_data
@@ -50,7 +50,7 @@ state and the topics to subscribe to.
 a wallbox on one RS-485 line (a virtual serial cable), which the bridge's gateway serves
 to other masters on loopback TCP, and a heat pump on the LAN (Modbus TCP).
 Ctrl-C (or SIGTERM) stops everything."""
-LOOPBACK = "127.0.0.1"
+
 DEFAULT_MODBUS_PORT = 5020
 DEFAULT_WEB_PORT = 8099
 DEFAULT_GATEWAY_PORT = 5502
@@ -363,13 +363,6 @@ _OPTIONS = {
 }
 
 
-def _bus(bus: str, where: str) -> dict[str, Any]:
-    if bus == SERIAL_BUS:
-        return {"id": bus, "transport": "rtu", "port": where, "baudrate": 9600, "timeout": 0.5}
-    host, _, port = where.rpartition(":")
-    return {"id": bus, "transport": "tcp", "host": host, "tcp_port": int(port), "timeout": 0.5}
-
-
 def _site_config(  # noqa: PLR0917 - the demo's own
     site: Site,
     mqtt: dict[str, Any],
@@ -382,29 +375,6 @@ def _site_config(  # noqa: PLR0917 - the demo's own
     if state_dir is not None:
         data["bridge"]["state_dir"] = state_dir
     return load_config_data(data, Path(f"demo-{site.name}.yaml"))
-
-
-def site_data(
-    site: Site, mqtt: dict[str, Any], where: dict[str, str], web_port: int, gateway_port: int
-) -> dict[str, Any]:
-    """The config document of ``site``'s bridge (before validation): its buses at
-    ``where``, its devices, the web page and, with an RS-485 line, the gateway."""
-    bridge: dict[str, Any] = {"web": {"enabled": True, "port": web_port}}
-    if site.serial:  # a second master reads the line through the bridge, not beside it
-        units = {d.unit: d.id for d in site.serial}
-        bridge["gateway"] = {"enabled": True, "host": LOOPBACK, "port": gateway_port}
-        bridge["gateway"] |= {"units": units, "max_age": 2.0}
-    data: dict[str, Any] = {
-        "mqtt": mqtt,
-        "bridge": bridge,
-        "buses": [_bus(bus, where[bus]) for bus in site.buses],
-        "devices": [
-            {"id": d.id, "name": d.name, "bus": d.bus, "unit": d.unit, "mapping": d.mapping}
-            | ({"allow_dangerous_writes": True} if d.allow_dangerous else {})
-            for d in site.devices
-        ],
-    }
-    return data
 
 
 @contextlib.asynccontextmanager

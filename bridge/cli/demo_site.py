@@ -15,7 +15,9 @@ cable and without stealing the line from the bridge.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+LOOPBACK = "127.0.0.1"
 SERIAL_BUS = "rs485"
 LAN_BUS = "lan"
 TCP_BUS = "demo"
@@ -110,3 +112,33 @@ SITES = {
         "-a 1 -t 3:float -B -r 1 -c 3 -1",  # the grid meter's three phase voltages
     ),
 }
+
+
+def site_data(
+    site: Site, mqtt: dict[str, Any], where: dict[str, str], web_port: int, gateway_port: int
+) -> dict[str, Any]:
+    """The config document of ``site``'s bridge (before validation): its buses at
+    ``where``, its devices, the web page and, with an RS-485 line, the gateway."""
+    bridge: dict[str, Any] = {"web": {"enabled": True, "port": web_port}}
+    if site.serial:  # a second master reads the line through the bridge, not beside it
+        units = {d.unit: d.id for d in site.serial}
+        bridge["gateway"] = {"enabled": True, "host": LOOPBACK, "port": gateway_port}
+        bridge["gateway"] |= {"units": units, "max_age": 2.0}
+    data: dict[str, Any] = {
+        "mqtt": mqtt,
+        "bridge": bridge,
+        "buses": [_bus(bus, where[bus]) for bus in site.buses],
+        "devices": [
+            {"id": d.id, "name": d.name, "bus": d.bus, "unit": d.unit, "mapping": d.mapping}
+            | ({"allow_dangerous_writes": True} if d.allow_dangerous else {})
+            for d in site.devices
+        ],
+    }
+    return data
+
+
+def _bus(bus: str, where: str) -> dict[str, Any]:
+    if bus == SERIAL_BUS:
+        return {"id": bus, "transport": "rtu", "port": where, "baudrate": 9600, "timeout": 0.5}
+    host, _, port = where.rpartition(":")
+    return {"id": bus, "transport": "tcp", "host": host, "tcp_port": int(port), "timeout": 0.5}
