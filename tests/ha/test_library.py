@@ -50,6 +50,7 @@ HOME = SITES["home"]
 LIBRARY_BUS = "library"
 SETTLE = 420.0  # s for Home Assistant to take in every library device's entities
 STEP = 60.0
+ENABLE = 150.0  # s for an enabled entity to get a state (Home Assistant reloads after 30 s)
 
 
 def library_devices() -> list[SeedDevice]:
@@ -184,6 +185,8 @@ async def test_the_home_site_and_every_library_device_in_home_assistant(
             await waited(arrived, SETTLE, every=5.0)
             socket = await hass.websocket()  # a new one: Home Assistant was busy until now
             try:
+                controls = [ids[f"{BASE}_{c.device}_{c.key}"] for c in HOME.controls]
+                await enabled(socket, controls)
                 for control in HOME.controls:
                     await control_reaches_the_device(socket, sims, ids, control)
                 stats = [ids[u] for u in counters]
@@ -212,6 +215,18 @@ async def registry(hass: HomeAssistant) -> dict[str, str]:
         await socket.close()
 
 
+async def enabled(socket: HomeAssistantSocket, entity_ids: list[str]) -> None:
+    """Enable the controls Home Assistant lists disabled, as a user does (a control that
+    changes how a device runs is offered disabled: the mapping's ``dangerous``); Home
+    Assistant reloads the MQTT entry 30 s later and they get a state."""
+    registry = {e["entity_id"]: e for e in await socket.entities()}
+    for entity_id in entity_ids:
+        if registry[entity_id].get("disabled_by") is not None:
+            await socket.call(
+                "config/entity_registry/update", entity_id=entity_id, disabled_by=None
+            )
+
+
 async def control_reaches_the_device(
     socket: HomeAssistantSocket,
     sims: dict[str, Simulator],
@@ -226,7 +241,7 @@ async def control_reaches_the_device(
         state = (await socket.states()).get(entity_id, {}).get("state")
         return "" if state not in (None, "unavailable") else f"{entity_id} is {state}"
 
-    await until(available, STEP)
+    await until(available, ENABLE)
     await set_from_home_assistant(socket, entity_id, control.payload)
     sim = sims[device.bus]
 
