@@ -189,7 +189,17 @@ async def test_the_home_site_and_every_library_device_in_home_assistant(
                 await enabled(socket, controls)
                 for control in HOME.controls:
                     await control_reaches_the_device(socket, sims, ids, control)
-                stats = [ids[u] for u in counters]
+                # the counters a user gets (a per-phase one is offered disabled), at least
+                # one of every device that has counters
+                offered = {
+                    e["entity_id"] for e in await socket.entities() if e["disabled_by"] is None
+                }
+                stats = [ids[u] for u in counters if ids[u] in offered]
+                owner = {
+                    u: d.id for d in every for u in counters if u.startswith(f"{BASE}_{d.id}_")
+                }
+                short = set(owner.values()) - {owner[u] for u in counters if ids[u] in offered}
+                assert not short, f"no energy counter offered enabled: {sorted(short)}"
                 rows = await compiled(socket, stats, since, time.time())
                 issues = await energy_issues(socket, stats)
                 states = await socket.states()
