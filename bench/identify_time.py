@@ -29,10 +29,8 @@ from bridge.core.request import Read, Write
 from bridge.core.timing import LinkTiming
 from bridge.modbus.commission import Submit, open_bus
 from bridge.modbus.identify import identify, request_bound
-from bridge.modbus.simulator import SimulatedUnit, Simulator, SunSpecUnit
-from bridge.sunspec.image import build_image
 from tests.integration.harness import serving_tcp
-from tests.sunspec_devices import every_image
+from tests.integration.test_identify import simulated  # identifying registers set as on the devices
 
 TIMING = LinkTiming.for_serial(9600, "N", 1, 8)
 TIMEOUT = 0.2  # s: the CLI's default wait for a unit's first answer
@@ -44,22 +42,6 @@ def placed(seed: int = 1) -> dict[str, int]:
     names = [*shipped_library(), *SUNSPEC]
     rng = random.Random(seed)  # noqa: S311 - where the devices sit, not a secret
     return dict(zip(names, rng.sample(list(UNITS), len(names)), strict=True))
-
-
-def simulated(units: dict[str, int]) -> Simulator:
-    library = shipped_library()
-    images = every_image()
-    specs: list[SimulatedUnit | SunSpecUnit] = [
-        SimulatedUnit(unit, library[name]) for name, unit in units.items() if name in library
-    ]
-    specs += [SunSpecUnit(units[n], build_image(images[n], b, n)) for n, b in SUNSPEC.items()]
-    sim = Simulator(specs, tick=0.0)
-    for name, unit in units.items():  # identifying registers read what the device's do
-        if name == "nastec_vasco":
-            sim.set_value(unit, "modbus_address", unit)
-        if name == "abb_b23":
-            sim.set_value(unit, "type_designation", "B23")
-    return sim
 
 
 async def sweep(units: dict[str, int]) -> tuple[dict[int, list[Read]], dict[int, str]]:
