@@ -24,6 +24,7 @@ import asyncio
 import bisect
 import contextlib
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -161,6 +162,7 @@ def report(soak: Soak, seconds: float) -> str:
         *(f"| {k} | {v} |" for k, v in sorted(r.counts.items()) if not k.startswith("thrown ")),
         "",
         *r.resource_lines(),
+        *r.health_lines(),
         "",
         f"Violations: {len(r.violations)}",
         *(
@@ -190,6 +192,12 @@ def main() -> None:
         )
         code = asyncio.run(soak.run())
         print(report(soak, seconds), flush=True)
+        if code:  # the logs outlive the run's folder, for the violations' story
+            kept = Path(tempfile.gettempdir()) / f"soak-seed{args.seed}-logs"
+            kept.mkdir(exist_ok=True)
+            for log in Path(name).glob("*.log"):
+                shutil.copy(log, kept / log.name)
+            print(f"logs kept in {kept}", flush=True)
     raise SystemExit(code)
 
 

@@ -190,6 +190,7 @@ def check_values(
     after it may have been published at its start (the broker held it, not the bridge).
     ``None`` (not read yet, e.g. a fresh start's first document) is no value: skipped."""
     last: dict[tuple[str, str], object] = {}
+    times = {name: [t for t, _ in changes] for name, changes in history.items()}
     found = []
     for p in published:
         name = (p.device, p.key)
@@ -199,7 +200,8 @@ def check_values(
             continue
         last[name] = p.value
         since = min([s for s, e in held_up if s <= p.at <= e + VALUE_GRACE] + [p.at])
-        held = _held_between(history[name], since - windows[name] - VALUE_GRACE, p.at + 0.5)
+        start = since - windows[name] - VALUE_GRACE
+        held = _held_between(times[name], history[name], start, p.at + 0.5)
         if not any(_same(p.value, v) for v in held):
             shown = ", ".join(repr(v) for v in held[-4:])
             detail = f"{p.device}.{p.key} = {p.value!r}; the device held {shown}"
@@ -208,11 +210,11 @@ def check_values(
 
 
 def _held_between(
-    history: Sequence[tuple[float, object]], start: float, end: float
+    times: Sequence[float], history: Sequence[tuple[float, object]], start: float, end: float
 ) -> list[object]:
-    times = [t for t, _ in history]
     first = max(0, bisect.bisect_right(times, start) - 1)  # the value in effect at start
-    return [v for t, v in history[first:] if t <= end]
+    last = bisect.bisect_right(times, end)
+    return [v for _, v in history[first:last]]
 
 
 def _same(a: object, b: object) -> bool:

@@ -167,6 +167,8 @@ class Records:
                 self.counts["log lines not JSON"] += 1
                 continue
             self.counts[f"log lines {record.get('level')}"] += 1
+            if record.get("event") == "mqtt_up":
+                self.counts[f"bridge MQTT sessions on {record.get('protocol')}"] += 1
             if record.get("level") in {"warning", "error", "critical"}:
                 self.warnings.append(now)
                 self.warning_messages[f"{record['level']}: {record.get('message', '')[:140]}"] += 1
@@ -229,6 +231,25 @@ class Records:
         self._seen.add(key)
         self.violations.append(found)
         print(f"VIOLATION [{found.position}] {found.invariant}: {found.detail}", flush=True)
+
+    def health_lines(self) -> list[str]:
+        """What the bridge's last health report and the line say of the run."""
+        lines = [f"RS-485 replies damaged (CRC noise or torn): {self.line.damaged}"]
+        buses = self.health.get("buses", {})
+        devices = self.health.get("devices", {})
+        assert isinstance(buses, dict)
+        assert isinstance(devices, dict)
+        for bus, b in buses.items():
+            lines.append(
+                f"bus {bus}: {b['requests']} requests, {b['timeouts']} timeouts, "
+                f"{b['frame_errors']} frame errors, {b['reopenings']} reopenings"
+            )
+        keys = ("writes_done", "writes_rejected", "writes_failed", "writes_expired")
+        keys += ("counter_readings_held", "counter_resets")
+        for device, d in devices.items():
+            figures = ", ".join(f"{k} {d.get(k)}" for k in keys if d.get(k))
+            lines.append(f"{device}: {d['requests']} requests, {d['errors']} errors; {figures}")
+        return [f"- {line}" for line in lines]
 
     def resource_lines(self) -> list[str]:
         if not self.samples:
