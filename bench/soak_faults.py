@@ -23,9 +23,11 @@ import argparse
 import asyncio
 import bisect
 import contextlib
+import functools
 import os
 import shutil
 import signal
+import subprocess
 import sys
 import tempfile
 import time
@@ -94,8 +96,8 @@ class Soak:
             ]
             for simulator in self.simulators.values():
                 await asyncio.wait_for(simulator.ready.wait(), 10)
-            config = lambda slower: build_config(  # noqa: E731
-                self.folder, self.broker.url, tcp_port, client_end, gateway_port, slower
+            config = functools.partial(
+                build_config, self.folder, self.broker.url, tcp_port, client_end, gateway_port
             )
             config(False)
             observer = Observer(self.broker.port, self.records)
@@ -109,7 +111,7 @@ class Soak:
                 task.cancel()
         return code
 
-    def _start_bridge(self, stack: contextlib.ExitStack) -> object:
+    def _start_bridge(self, stack: contextlib.ExitStack) -> subprocess.Popen[bytes]:
         log = self.folder / f"bridge-{len(self.bridge_logs)}.log"
         self.bridge_logs.append(log)
         self.records.log_offsets[log] = 0
@@ -117,7 +119,9 @@ class Soak:
         run = [sys.executable, "-m", "bridge.cli", "run", "-c", config, "--log-format", "json"]
         return stack.enter_context(process(run, log))
 
-    async def _watch(self, bridge: object, stack: contextlib.ExitStack, thrower: Thrower) -> int:
+    async def _watch(
+        self, bridge: subprocess.Popen[bytes], stack: contextlib.ExitStack, thrower: Thrower
+    ) -> int:
         end = self.started + self.seconds
         next_check = self.started + CHECK_EVERY
         async with asyncio.TaskGroup() as group:
@@ -128,12 +132,12 @@ class Soak:
                 self.records.digest(self.simulators, now)
                 for log in self.bridge_logs:
                     self.records.read_log(log, now)
-                if bridge.poll() is not None:  # type: ignore[attr-defined]
-                    self.records.exited(now, bridge.returncode, self.position_at(now))  # type: ignore[attr-defined]
+                if bridge.poll() is not None:
+                    self.records.exited(now, bridge.returncode, self.position_at(now))
                     bridge = self._start_bridge(stack)
-                thrower.bridge_pid = bridge.pid  # type: ignore[attr-defined]
+                thrower.bridge_pid = bridge.pid
                 if now >= self.records.next_sample:
-                    self.records.sample(now, bridge.pid, memory_kib, SAMPLE_EVERY)  # type: ignore[attr-defined]
+                    self.records.sample(now, bridge.pid, memory_kib, SAMPLE_EVERY)
                 if now >= next_check:
                     self.records.check(now, self.position_at)
                     next_check = now + max(CHECK_EVERY, (now - self.started) / 60)
