@@ -50,6 +50,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import json
 import logging
 import time
 from collections.abc import Awaitable, Callable
@@ -384,6 +385,24 @@ class Bridge:
             if asyncio.iscoroutine(work):
                 work.close()
             log.debug("the bridge is stopping: work not started")
+
+    def hangup(self) -> None:
+        """SIGHUP (``systemctl reload``, a closed terminal): read the mapping files again, as
+        ``bridge/request/mapping/reload`` with no devices does, and go on running; the
+        config file itself is read at start only."""
+        log.info(
+            "SIGHUP: reading the mapping files again (the config file is read at start "
+            "only: restart the bridge to apply a change to it)"
+        )
+        if self._group is not None:
+            self._spawn(self._reload_mappings())
+
+    async def _reload_mappings(self) -> None:
+        answer = json.loads(await self.management.handle("mapping/reload", b"{}"))
+        if answer["status"] == "ok":
+            log.info("SIGHUP: mappings changed: %s", answer["data"]["changed"] or "none")
+        else:
+            log.error("SIGHUP: mappings not reloaded: %s", answer["error"])
 
     # --- management -------------------------------------------------------------------
 

@@ -150,7 +150,8 @@ def _run(args: argparse.Namespace, _: TextIO) -> int:
     loaded = load_config(args.config)
     configure_logging(args.log_level, args.log_format)
     try:
-        asyncio.run(until_stopped(Bridge(loaded).run()))
+        bridge = Bridge(loaded)
+        asyncio.run(until_stopped(bridge.run(), hangup=bridge.hangup))
     except ExceptionGroup as failed:  # the bridge's task groups wrap what ended it
         reason = first_of(failed, BridgeError)
         if reason is None:

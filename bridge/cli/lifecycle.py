@@ -92,8 +92,12 @@ class _DaemonThreads(ThreadPoolExecutor):
         """Nothing to wait for: daemon threads end with the process."""
 
 
-async def until_stopped(work: Coroutine[Any, Any, None]) -> None:
+async def until_stopped(
+    work: Coroutine[Any, Any, None], hangup: Callable[[], None] | None = None
+) -> None:
     """Run ``work`` until it ends or SIGINT/SIGTERM arrives (Ctrl-C, ``docker stop``).
+    With ``hangup``, SIGHUP calls it (a service's "reload") instead of ending the process,
+    which is what SIGHUP's default does.
 
     The first signal cancels ``work``, which ends within seconds (a write in flight is
     finished, the farewell is bounded); a second one, ``SAME_STOP`` seconds or more later
@@ -120,9 +124,11 @@ async def until_stopped(work: Coroutine[Any, Any, None]) -> None:
 
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, stop, signum)
+    if hangup is not None:
+        loop.add_signal_handler(signal.SIGHUP, hangup)
     try:
         with contextlib.suppress(asyncio.CancelledError):
             await task
     finally:
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             loop.remove_signal_handler(signum)

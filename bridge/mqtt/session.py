@@ -110,6 +110,10 @@ class MqttClient:
         self._on_announced = on_announced  # hears the protocol once ``online`` is out
         self.announced = False
         self._version = version or config.version  # a known 3.1.1 broker: no MQTT 5 try
+        # a broker known to answer MQTT 5 (this run's last session was 5): its silence is a
+        # stall (SIGSTOP, overload), not an old broker, and 3.1.1 would lose the retain flag
+        # of live commands, so a retained command published meanwhile would run
+        self._known_5 = version == "5"
         self._will_topic = will_topic
         self._client_id = client_id if client_id is not None else config.client_id
         self._connection: Connection | None = None
@@ -146,6 +150,8 @@ class MqttClient:
             try:
                 connection = await self._open(aiomqtt.ProtocolVersion.V5, context)
             except MqttConnectError as exc:
+                if isinstance(exc, MqttUnansweredError) and self._known_5:
+                    raise  # the reconnect loop tries MQTT 5 again
                 if isinstance(exc, MqttUnansweredError):
                     _log.info("%s does not answer an MQTT 5 CONNECT; trying 3.1.1", url)
                 elif exc.code == _UNSUPPORTED_PROTOCOL_VERSION:

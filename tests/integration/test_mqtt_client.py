@@ -498,6 +498,23 @@ async def test_reconnects_ask_for_3_1_1_once_the_broker_needed_it(
 
 
 @pytest.mark.asyncio
+async def test_a_broker_that_answered_5_is_not_taken_for_an_old_one_when_it_stalls(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Found by the soak (bench/soak_faults.py, issue 38): a broker stopped for a while
+    (SIGSTOP) let an MQTT 5 CONNECT go unanswered; the bridge took it for a broker without
+    MQTT 5, reconnected with 3.1.1 and kept 3.1.1 for the rest of the run, where a live
+    retained command arrives without its retain flag, and ran it. A broker this run knows
+    answers MQTT 5 (the reconnect loop passes ``version="5"``) gets 5 again."""
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.5)
+    stub = StubBroker(mqtt5="ignore")  # stands for the stalled broker: no CONNACK to 5
+    async with stub as url:
+        with pytest.raises(MqttUnansweredError):
+            await MqttClient(cfg(url, version="5"), will_topic=STATE, version="5").__aenter__()
+    assert stub.levels == [5]  # no 3.1.1 try
+
+
+@pytest.mark.asyncio
 async def test_a_publish_waiting_for_its_ack_ends_when_the_broker_dies() -> None:
     """aiomqtt alone waits its whole 10 s timeout for a PUBACK that cannot come any more."""
     async with (
