@@ -115,7 +115,7 @@ async def test_three_masters_share_the_line_through_the_bridge(
             pymodbus_master(s, 10), mbpoll_master(s, 5), command
         )
         for answer, registers in pymodbus_reads + mbpoll_reads:
-            assert answer == registers
+            assert answer in registers  # the device's registers at one moment of the read
         await until_ha_reads(hass, "sensor.starter_soft_stop_time", 14)
 
         # Home Assistant's own write action goes through the command checks
