@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import asyncio
 import time
+from pathlib import Path
 
 import pytest
 
+from bridge.config import load_config_data
 from bridge.core.fair_share import BUS, WINDOW, FairShare
 from bridge.core.protocol import Protocol
-from bridge.errors import CommandExpiredError
+from bridge.errors import CommandExpiredError, ConfigError
+from bridge.modbus.engine import Engine
 from bridge.modbus.scheduler import Priority
 from tests.unit.test_scheduler import READ, WRITE, ScriptedTransport, started, stop
 
@@ -184,3 +187,46 @@ async def test_a_master_waiting_past_its_deadline_is_answered_at_once_not_at_the
     assert len(transport.calls) == 1
     poll.cancel()
     await stop(task)
+
+
+def test_the_config_sets_the_share_per_gateway_and_per_device() -> None:
+    data = {
+        "bridge": {"gateway": {"poll_share": 0.25}},
+        "buses": [{"id": "line", "transport": "rtu", "port": "/dev/null"}],
+        "devices": [
+            {"id": "genset", "bus": "line", "unit": 5, "mapping": "smartgen_hgm6100"}
+            | {"gateway_poll_share": 0.8},
+            {"id": "pump", "bus": "line", "unit": 1, "mapping": "nastec_vasco"},
+        ],
+    }
+    fair = Engine(load_config_data(data, Path("share.yaml"))).schedulers["line"].fair
+    assert (fair.share, fair.shares) == (0.25, {5: 0.8})
+
+
+@pytest.mark.parametrize(
+    ("where", "value", "field"),
+    [
+        ("gateway", 1.5, "bridge.gateway.poll_share"),
+        ("gateway", -0.1, "bridge.gateway.poll_share"),
+        ("device", 2, "devices.genset.gateway_poll_share"),
+        ("max_wait", 0, "bridge.gateway.max_wait"),
+    ],
+)
+def test_a_share_or_wait_out_of_range_names_its_field(where: str, value: float, field: str) -> None:
+    device: dict[str, object] = {"id": "genset", "bus": "line", "unit": 5}
+    device["mapping"] = "smartgen_hgm6100"
+    gateway: dict[str, object] = {}
+    if where == "gateway":
+        gateway["poll_share"] = value
+    elif where == "max_wait":
+        gateway["max_wait"] = value
+    else:
+        device["gateway_poll_share"] = value
+    data = {
+        "bridge": {"gateway": gateway},
+        "buses": [{"id": "line", "transport": "rtu", "port": "/dev/null"}],
+        "devices": [device],
+    }
+    with pytest.raises(ConfigError) as refused:
+        load_config_data(data, Path("share.yaml"))
+    assert any(issue.startswith(field) for issue in refused.value.issues), refused.value.issues
