@@ -142,6 +142,7 @@ def initial_image(mapping: Mapping, points: AnyMapping[str, Point]) -> dict[Cell
     for _ in range(len(roles) + 1):  # limit chains settle in a few passes
         if not _respect_limits(points, image):
             break
+    image |= _alarms_off(points, image)
     for point in points.values():  # a set value in use shows the set value
         followed = (
             points.get(point.entity.simulate.follows or "") if point.entity.simulate else None
@@ -149,6 +150,19 @@ def initial_image(mapping: Mapping, points: AnyMapping[str, Point]) -> dict[Cell
         if followed is not None and point.entity.readable:
             image |= _nearest_storable(point, decode(followed, image), image)
     return image
+
+
+def _alarms_off(points: AnyMapping[str, Point], image: dict[Cell, int]) -> dict[Cell, int]:
+    """A healthy device: the words an alarm's ``on_when`` reads hold 0 where a value given
+    to another entity on them (a fault word shown as a number) would raise the alarm."""
+    cleared: dict[Cell, int] = {}
+    for point in points.values():
+        when = point.entity.on_when
+        if not point.entity.alarm or when is None or decode(point, image) is not True:
+            continue
+        if (when.min is not None and when.min > 0) or (when.max is not None and when.max < 0):
+            cleared |= {(point.table, a): 0 for a in point.span}
+    return cleared
 
 
 def numbered(key: str) -> tuple[str, int] | None:
@@ -235,8 +249,6 @@ def _initial_value(point: Point, is_status: bool, role: str) -> Value:
         return not entity.alarm and (is_status or any(word in words for word in _TRUE_WORDS))
     if role == "scale":
         return 0
-    if any(word in point.key.split("_") for word in _FAULT_WORDS):
-        return 0  # a fault code or fault word as a number: healthy is none
     low, high = number_range(point)
     value = _plausible_number(point, low, high) * {"min": 0.5, "max": 2.0}.get(role, 1.0)
     return round(min(max(value, low), high), entity.decimals)
