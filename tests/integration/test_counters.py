@@ -142,9 +142,15 @@ async def test_a_misread_is_never_published_and_is_said_once(
         for r in caplog.records
         if r.levelno == logging.WARNING and "not published" in r.getMessage()
     ]
-    said = {(m.split(": ")[0], m.split(": ")[1].split(" ")[0]) for m in warnings}
+    # "pump: motor_life read 0.0 (zero) below ...": device, counter and cause. The Nastec
+    # reads a register at a time, so a zero that ends between its two words' reads is read
+    # once more as a lower value: another cause, said once too
+    said = {
+        (m.split(": ")[0], m.split(": ")[1].split(" ")[0], m.split("(")[1].split(")")[0])
+        for m in warnings
+    }
     assert len(warnings) == len(said)  # once per device, counter and cause
-    assert {key for _, key in said} >= {"energy", "run_hours", "motor_life"}
+    assert {key for _, key, _ in said} >= {"energy", "run_hours", "motor_life"}
 
 
 @pytest.mark.asyncio
