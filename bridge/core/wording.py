@@ -13,6 +13,7 @@ names the ``alarms`` sensor joins (``discovery_alarms.alarm_names``).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from collections.abc import Mapping as AnyMapping
 
@@ -25,14 +26,20 @@ from bridge.core.mapping import Point
 
 UNKNOWN = "Unknown"  # Home Assistant's word for a state it has no value for
 _SWITCH_STATES = ("Off", "On")
+_IDENTIFIER = re.compile(r"^[a-z][a-z0-9_]*$")  # a label written as a key: running_forward
 
 
 def value_text(
-    entity: Entity, value: Value, decimals: int | None, allow_dangerous_writes: bool
+    entity: Entity,
+    value: Value,
+    decimals: int | None,
+    allow_dangerous_writes: bool,
+    units: bool = False,
 ) -> str:
     """``value`` of ``entity`` as Home Assistant shows it (without the unit): the platform
     the entity is published as (``allow_dangerous_writes`` decides for a guarded switch)
-    picks the words of a boolean."""
+    picks the words of a boolean; ``units``: the enum's labels are units (``unit_sources``),
+    shown as they are (``bar``, not ``Bar``)."""
     if value is None:
         return UNKNOWN
     if isinstance(value, bool):
@@ -41,17 +48,23 @@ def value_text(
             return BINARY_SENSOR_STATES[binary_sensor_class(entity)][value]
         return _SWITCH_STATES[value]
     if isinstance(value, str):
-        return label_text(entity, value)
+        return label_text(entity, value, units)
     return number_text(value, decimals)
 
 
-def label_text(entity: Entity, value: str) -> str:
-    """An enum label in words; a code without one as ``Unknown code 23``; text as it is."""
+def label_text(entity: Entity, value: str, units: bool = False) -> str:
+    """An enum label in words (one already in words, ``2.5 kHz``, as it is); a code
+    without one as ``Unknown code 23``; text, and units, as they are."""
     if entity.enum is None:
         return value
     if is_unknown_code(entity, value):
         return f"Unknown code {value.removeprefix(UNKNOWN_CODE)}"
-    return in_words(value)
+    return value if units or not _IDENTIFIER.match(value) else in_words(value)
+
+
+def unit_sources(points: AnyMapping[str, Point]) -> frozenset[str]:
+    """Keys of the enums whose labels are another entity's unit (``unit_from``)."""
+    return frozenset(p.unit_source.key for p in points.values() if p.unit_source is not None)
 
 
 def number_text(value: float, decimals: int | None) -> str:

@@ -35,7 +35,7 @@ from bridge.core.discovery_entity import shown_name
 from bridge.core.health_report import Snapshot, build_health_report
 from bridge.core.mapping import Point
 from bridge.core.state import active_alarms, alarm_active, published
-from bridge.core.wording import alarm_texts, value_text
+from bridge.core.wording import alarm_texts, unit_sources, value_text
 from bridge.modbus.poller import DevicePoller
 
 WINDOW = 10.0  # seconds of bus traffic the utilisation covers
@@ -98,10 +98,11 @@ def summary(poller: DevicePoller, health: dict[str, Any]) -> dict[str, Any]:
 
 def device_document(poller: DevicePoller, health: dict[str, Any], topic: str) -> dict[str, Any]:
     """A device's page: its summary, its MQTT topic and every published value."""
+    units = unit_sources(poller.points)
     return {
         **summary(poller, health),
         "topic": topic,
-        "values": [value_row(poller, key) for key in published(poller.points)],
+        "values": [value_row(poller, key, units) for key in published(poller.points)],
     }
 
 
@@ -120,18 +121,19 @@ def status_and_alarms(poller: DevicePoller) -> dict[str, Any]:
     }
 
 
-def value_row(poller: DevicePoller, key: str) -> dict[str, Any]:
+def value_row(poller: DevicePoller, key: str, units: frozenset[str]) -> dict[str, Any]:
+    """One value, as published and as Home Assistant shows it (``units``: the keys whose
+    labels are units, ``wording.unit_sources``)."""
     point = poller.points[key]
     entity = point.entity
     value = poller.values.get(key)
-    decimals = decimals_of(point, poller.image)
     return {
         "key": key,
         "name": shown_name(entity.name, poller.device.display_name),
         "value": value,
-        "text": value_text(entity, value, decimals, poller.device.allow_dangerous_writes),
+        "text": _text(poller, point, value, key in units),
         "unit": unit_of(point, poller.image),
-        "decimals": decimals,
+        "decimals": decimals_of(point, poller.image),
         "alarm": alarm_active(point, value),
         "component": entity.component.value,
         "category": entity.ha.entity_category,
@@ -142,13 +144,15 @@ def value_row(poller: DevicePoller, key: str) -> dict[str, Any]:
 def changed_values(poller: DevicePoller, keys: Iterable[str]) -> dict[str, Any]:
     """The values of ``keys`` (those published) with the device's status and alarms."""
     shown = set(published(poller.points))
+    units = unit_sources(poller.points)
     return {
         "device": poller.device.id,
         **status_and_alarms(poller),
-        "values": {key: value_row(poller, key) for key in sorted(set(keys) & shown)},
+        "values": {key: value_row(poller, key, units) for key in sorted(set(keys) & shown)},
     }
 
 
-def _text(poller: DevicePoller, point: Point, value: Value) -> str:
+def _text(poller: DevicePoller, point: Point, value: Value, units: bool = False) -> str:
     decimals = decimals_of(point, poller.image)
-    return value_text(point.entity, value, decimals, poller.device.allow_dangerous_writes)
+    allowed = poller.device.allow_dangerous_writes
+    return value_text(point.entity, value, decimals, allowed, units)
