@@ -146,7 +146,7 @@ function renderOverview(overview) {
       const errors = `${d.errors} / ${d.requests}` + (d.alarms.length ? ` · alarms: ${d.alarm_names.join(", ")}` : "");
       return row(
         [name, d.model, `${d.bus} / ${d.unit}`, el("td", d.state, `state ${d.state}`),
-         shown("td", d.status_text, d.status, "status"), time(d.last_success),
+         shown("td", d.status_text, d.status, "status"), el("td", time(d.last_success), "nowrap"),
          el("td", `${ms(d.latency_p50_ms)} / ${ms(d.latency_p95_ms)}`, "nowrap"), el("td", errors, d.alarms.length ? "alarm" : "")],
         { "data-device": d.id },
       );
