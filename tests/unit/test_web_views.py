@@ -7,10 +7,12 @@ from typing import Any
 
 from bridge.app import Bridge
 from bridge.core.codec import unknown_code
+from bridge.core.discovery import DeviceInfo, Origin, build_device_discovery
 from bridge.core.discovery_alarms import in_words
 from bridge.core.discovery_entity import shown_name
 from bridge.core.hass import BINARY_SENSOR_STATES
 from bridge.core.state import published
+from bridge.core.topics import Topics
 from bridge.modbus.poller import DevicePoller
 from bridge.web.views import changed_values, device_document, summary
 from tests.unit.test_demo_view import demo_bridge
@@ -98,3 +100,32 @@ def test_a_unit_register_reads_its_unit_as_it_is() -> None:
     rows = {row["key"]: row for row in device_document(pump, {}, "t")["values"]}
     unit = rows["unit"]
     assert unit["text"] == unit["value"], unit  # bar, not Bar
+
+
+def test_the_page_names_and_words_are_those_of_the_discovery_payload() -> None:
+    """Each value under the ``name`` its discovery component gives Home Assistant, a binary
+    sensor in the words of the ``device_class`` it is published with, an enum's value one
+    of the ``options`` Home Assistant takes."""
+    bridge = demo_bridge()
+    for each in bridge.engine.devices.values():
+        info = DeviceInfo(
+            id=each.device.id,
+            name=each.device.display_name,
+            mapping=each.mapping,
+            options=dict(each.device.options),
+            bus=each.device.bus,
+            unit=each.device.unit,
+            allow_dangerous_writes=each.device.allow_dangerous_writes,
+            fast_interval=2.0,
+            slow_interval=60.0,
+        )
+        cmps = build_device_discovery(info, Topics("modbus", "homeassistant"), Origin())["cmps"]
+        rows = device_document(each, {}, "t")["values"]
+        for row in rows:
+            component = cmps[row["key"]]  # every value the page shows is an entity in HA
+            assert row["name"] == component["name"], row["key"]
+            if component["platform"] == "binary_sensor" and row["value"] is not None:
+                words = BINARY_SENSOR_STATES[component.get("device_class")]
+                assert row["text"] == words[row["value"]], row
+            if "options" in component and row["value"] is not None:
+                assert row["value"] in component["options"], row
