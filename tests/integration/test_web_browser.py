@@ -82,6 +82,8 @@ async def test_a_technician_sees_values_change_a_device_drop_out_and_a_scan(
         s.sim.set_value(PUMP, "alarm_dry_running", True)
         await page.until(f"document.querySelector({dry!r})?.classList.contains('alarm')")
         assert "ALARM" in await page.evaluate(text(dry))
+        # the change arrives in Home Assistant's words: an alarm bit is a problem sensor
+        assert await page.evaluate(text(f"{dry} .value")) == "Problem"
         alarms = await page.until(text("#device-alarms"))
         assert alarms == "Active alarms: Dry running"  # the name Home Assistant shows
         assert await page.evaluate("document.querySelector('#device-alarms').title") == (
