@@ -315,6 +315,7 @@ class Bridge:
                 "coalesced": counters.coalesced,
                 "dropped": self.state.dropped,
             }
+            report["process"] = {"tasks": len(asyncio.all_tasks()), "outbox": self.state.queued}
             if self.gateway is not None:
                 report["gateway"] = self.gateway.health()
             await client.publish(self.topics.bridge_health, compact(report), retain=True)

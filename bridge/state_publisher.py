@@ -79,6 +79,11 @@ class StatePublisher:
         self._alarms: dict[str, frozenset[str]] = {}  # the alarms last said active
         self._carried = False  # the first session read what a run before left retained
 
+    @property
+    def queued(self) -> int:
+        """Messages waiting in the outbox (bridge/health's ``process.outbox``)."""
+        return len(self._outbox)
+
     # --- what the bridge asks for ---------------------------------------------------
 
     def changed(self, update: DeviceUpdate) -> None:
