@@ -16,7 +16,9 @@ runs) does one of two things:
   the walk of a dead unit delays no other device more than one poll of it would.
 
 Then it watches the device: one that was offline and answers again (a firmware update
-reboots it) has its chain walked again, as after a start, and rebuilt if it changed.
+reboots it) has its chain walked again, as after a start, and rebuilt if it changed; at
+most once every ``REWALK_GAP`` (a device that keeps dropping off a noisy line is checked
+once the gap has passed, not at every return).
 
 ``rewalk(device_id)`` walks and builds now (``mapping/reload`` with ``rewalk``) and
 swaps the mapping in when it differs. A cache that cannot be written is logged; the
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
@@ -51,6 +54,7 @@ Swap = Callable[[str, Mapping], Awaitable[None]]
 NOT_SUNSPEC_RETRY = 600.0  # seconds before a unit without the marker is asked again
 FIRST_POLL_WAIT = 30.0  # seconds a cached device's chain check waits for its first poll
 WATCH = 1.0  # seconds between two looks at a device's availability (rebooted: walk again)
+REWALK_GAP = 600.0  # seconds at least between two checks of a chain after the device's returns
 BACKOFF_INITIAL, BACKOFF_MAX = 5.0, 300.0  # a failed walk, as an unreachable device
 
 
@@ -113,13 +117,16 @@ class SunSpecDevices:
     async def _after_reboots(self, device_id: str) -> None:
         """Walk the chain again whenever the device answers after being offline (a firmware
         update reboots it); rebuilt if it changed. Ends when it is switched to a file."""
-        was_offline = False
+        was_offline = due = False
+        checked = -math.inf
         while self.engine.device(device_id).device.is_sunspec:
             poller = self.engine.device(device_id)
             if poller.health.online is False:
                 was_offline = True
             elif poller.health.online and was_offline:
-                was_offline = False
+                was_offline, due = False, True
+            if due and poller.health.online and time.monotonic() >= checked + REWALK_GAP:
+                due, checked = False, time.monotonic()
                 log.info(
                     "%s: answers again; checking its SunSpec model chain (a firmware update "
                     "changes it)",
