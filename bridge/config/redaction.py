@@ -1,0 +1,105 @@
+"""Config data and text with their secrets hidden, for views, logs and conflict diffs.
+
+A secret is the value of a key in ``SECRET_KEYS`` (``password``, ``token``, and the
+``*_file`` and ``*_env`` that say where one is) at any level, and the password of a broker
+URL (``mqtt://user:pass@host``). Each is shown as ``SECRET_MARK``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Iterable
+from typing import Any
+
+from bridge.config.edits import SECRET_KEYS, SECRET_MARK
+
+_URL_PASSWORD = re.compile(r"(://[^/\s:@]*:)[^@/\s]*@")
+_KEYS = "|".join(sorted(SECRET_KEYS, key=len, reverse=True))
+_KEY_VALUE = re.compile(
+    rf"(?<![\w-])(['\"]?(?:{_KEYS})['\"]?\s*:)([ \t]+)([^,}}\]#\n]*[^,}}\]#\s])"
+)
+_BLOCK_START = re.compile(
+    rf"^(\s*)(?:-\s+)?['\"]?(?:{_KEYS})['\"]?\s*:\s*(?:[|>][-+0-9]*)?\s*(?:#.*)?$"
+)
+MAX_ROWS = 40  # rows of a change summary; more are counted
+
+
+def public_data(data: Any) -> Any:
+    """``data`` (plain config data) with every secret replaced by SECRET_MARK."""
+    if isinstance(data, dict):
+        return {
+            key: SECRET_MARK if key in SECRET_KEYS and value is not None else public_data(value)
+            for key, value in data.items()
+        }
+    if isinstance(data, list):
+        return [public_data(item) for item in data]
+    if isinstance(data, str):
+        return _URL_PASSWORD.sub(rf"\g<1>{SECRET_MARK}@", data)
+    return data
+
+
+def redact_text(text: str) -> str:
+    """Config text with secret values replaced (block scalars of a secret key too)."""
+    lines = []
+    block_indent: int | None = None
+    for line in text.splitlines(keepends=True):
+        indent = len(line) - len(line.lstrip(" "))
+        if block_indent is not None and (not line.strip() or indent > block_indent):
+            lines.append(" " * indent + SECRET_MARK + "\n" if line.strip() else line)
+            continue
+        block_indent = None
+        start = _BLOCK_START.match(line)
+        if start is not None:
+            block_indent = len(start.group(1))
+        hidden = _KEY_VALUE.sub(rf"\g<1>\g<2>{SECRET_MARK}", line)
+        lines.append(_URL_PASSWORD.sub(rf"\g<1>{SECRET_MARK}@", hidden))
+    return "".join(lines)
+
+
+def change_rows(before: Any, after: Any, renamed: tuple[str, str] | None = None) -> list[str]:
+    """``path: old -> new`` for each value that differs (secrets hidden; list entries with
+    an ``id`` named by it; an entry gone in one row), at most MAX_ROWS of them.
+    ``renamed``: a device's old and new id, its values compared under the new one."""
+    old, new = _flat(public_data(before)), _flat(public_data(after))
+    if renamed is not None:
+        was, now = (f"devices.{name}." for name in renamed)
+        old = {(now + p[len(was) :] if p.startswith(was) else p): v for p, v in old.items()}
+    gone = {_entry(p) for p in old} - {_entry(p) for p in new}
+    rows = [f"{entry}: (removed)" for entry in sorted(gone)]
+    for path in list(old) + [p for p in new if p not in old]:
+        if _entry(path) in gone:
+            continue
+        if path not in new:
+            rows.append(f"{path}: {old[path]} -> (removed)")
+        elif path not in old:
+            rows.append(f"{path}: {new[path]}")
+        elif old[path] != new[path]:
+            rows.append(f"{path}: {old[path]} -> {new[path]}")
+    if len(rows) > MAX_ROWS:
+        rows = [*rows[:MAX_ROWS], f"... {len(rows) - MAX_ROWS} more"]
+    return rows
+
+
+def _entry(path: str) -> str:
+    """The list entry a flat path is in (``devices.pump``), or the path's section."""
+    return ".".join(path.split(".")[:2])
+
+
+def _flat(data: Any, path: str = "") -> dict[str, str]:
+    items: Iterable[tuple[Any, Any]]
+    if isinstance(data, dict) and data:
+        items = data.items()
+    elif isinstance(data, list) and data:
+        items = ((_entry_name(item, i), item) for i, item in enumerate(data))
+    else:
+        return {path: json.dumps(data, default=str, ensure_ascii=False)[:200]}
+    flat: dict[str, str] = {}
+    for key, value in items:
+        flat.update(_flat(value, f"{path}.{key}" if path else str(key)))
+    return flat
+
+
+def _entry_name(item: Any, index: int) -> str:
+    name = item.get("id") if isinstance(item, dict) else None
+    return name if isinstance(name, str) and name else str(index)
