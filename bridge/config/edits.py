@@ -121,7 +121,7 @@ class EditDevice(_Change):
         for path in value:
             if not _PATH.match(path) or path.split(".")[0] not in _DEVICE_FIELDS:
                 raise ValueError(
-                    f"{path[:MAX_ID]!r}: not a device field (have {sorted(_DEVICE_FIELDS)})"
+                    f"device.{path[:MAX_ID]}: not a device field (have {sorted(_DEVICE_FIELDS)})"
                 )
         if _bounded(value, "device") > MAX_NODES:
             raise ValueError(f"device: more than {MAX_NODES} values")
