@@ -58,24 +58,25 @@ def redact_text(text: str) -> str:
 
 
 def change_rows(before: Any, after: Any, renamed: tuple[str, str] | None = None) -> list[str]:
-    """``path: old -> new`` for each value that differs (secrets hidden; list entries with
-    an ``id`` named by it; an entry gone in one row), at most MAX_ROWS of them.
-    ``renamed``: a device's old and new id, its values compared under the new one."""
-    old, new = _flat(public_data(before)), _flat(public_data(after))
-    if renamed is not None:
-        was, now = (f"devices.{name}." for name in renamed)
-        old = {(now + p[len(was) :] if p.startswith(was) else p): v for p, v in old.items()}
+    """``path: old -> new`` for each value that differs (secrets hidden: a new one shows as
+    changed; list entries with an ``id`` named by it; an entry gone in one row), at most
+    MAX_ROWS of them. ``renamed``: a device's old and new id, compared under the new one."""
+    old, new = _flat(before, renamed), _flat(after)
+    shown_old = {p: v[:200] for p, v in _flat(public_data(before), renamed).items()}
+    shown_new = {p: v[:200] for p, v in _flat(public_data(after)).items()}
     gone = {_entry(p) for p in old} - {_entry(p) for p in new}
     rows = [f"{entry}: (removed)" for entry in sorted(gone)]
     for path in list(old) + [p for p in new if p not in old]:
-        if _entry(path) in gone:
+        if _entry(path) in gone or old.get(path) == new.get(path):
             continue
         if path not in new:
-            rows.append(f"{path}: {old[path]} -> (removed)")
+            rows.append(f"{path}: {shown_old[path]} -> (removed)")
         elif path not in old:
-            rows.append(f"{path}: {new[path]}")
-        elif old[path] != new[path]:
-            rows.append(f"{path}: {old[path]} -> {new[path]}")
+            rows.append(f"{path}: {shown_new[path]}")
+        elif shown_old[path] == shown_new[path]:
+            rows.append(f"{path}: {shown_new[path]} (changed)")
+        else:
+            rows.append(f"{path}: {shown_old[path]} -> {shown_new[path]}")
     if len(rows) > MAX_ROWS:
         rows = [*rows[:MAX_ROWS], f"... {len(rows) - MAX_ROWS} more"]
     return rows
@@ -86,17 +87,26 @@ def _entry(path: str) -> str:
     return ".".join(path.split(".")[:2])
 
 
-def _flat(data: Any, path: str = "") -> dict[str, str]:
+def _flat(data: Any, renamed: tuple[str, str] | None = None) -> dict[str, str]:
+    """``data`` as ``path: value`` rows (``renamed``: a device's paths under its new id)."""
+    flat = _paths(data)
+    if renamed is None:
+        return flat
+    was, now = (f"devices.{name}." for name in renamed)
+    return {(now + p[len(was) :] if p.startswith(was) else p): v for p, v in flat.items()}
+
+
+def _paths(data: Any, path: str = "") -> dict[str, str]:
     items: Iterable[tuple[Any, Any]]
     if isinstance(data, dict) and data:
         items = data.items()
     elif isinstance(data, list) and data:
         items = ((_entry_name(item, i), item) for i, item in enumerate(data))
     else:
-        return {path: json.dumps(data, default=str, ensure_ascii=False)[:200]}
+        return {path: json.dumps(data, default=str, ensure_ascii=False)}
     flat: dict[str, str] = {}
     for key, value in items:
-        flat.update(_flat(value, f"{path}.{key}" if path else str(key)))
+        flat.update(_paths(value, f"{path}.{key}" if path else str(key)))
     return flat
 
 
