@@ -262,8 +262,23 @@ def _sync_folder(folder: Path) -> None:
 
 
 def conflict_diff(read: bytes, on_disk: bytes, name: str) -> str:
-    """A unified diff from what was read to what is on disk, secrets hidden."""
-    before = redact_text(read.decode("utf-8", "replace")).splitlines(keepends=True)
-    after = redact_text(on_disk.decode("utf-8", "replace")).splitlines(keepends=True)
-    lines = difflib.unified_diff(before, after, f"{name} (read)", f"{name} (on disk)")
+    """A unified diff from what was read to what is on disk, secrets hidden: the lines are
+    compared as they are (a changed password shows as a changed line), then shown hidden."""
+    before = read.decode("utf-8", "replace").splitlines(keepends=True)
+    after = on_disk.decode("utf-8", "replace").splitlines(keepends=True)
+    shown_before = redact_text("".join(before)).splitlines(keepends=True)
+    shown_after = redact_text("".join(after)).splitlines(keepends=True)
+    lines = [f"--- {name} (read)\n", f"+++ {name} (on disk)\n"]
+    matcher = difflib.SequenceMatcher(None, before, after, autojunk=False)
+    for group in matcher.get_grouped_opcodes(3):
+        first, last = group[0], group[-1]
+        lines.append(
+            f"@@ -{first[1] + 1},{last[2] - first[1]} +{first[3] + 1},{last[4] - first[3]} @@\n"
+        )
+        for tag, i1, i2, j1, j2 in group:
+            if tag == "equal":
+                lines += [f" {line}" for line in shown_before[i1:i2]]
+                continue
+            lines += [f"-{line}" for line in shown_before[i1:i2]]
+            lines += [f"+{line}" for line in shown_after[j1:j2]]
     return "".join(line if line.endswith("\n") else line + "\n" for line in lines)
