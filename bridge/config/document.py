@@ -123,7 +123,11 @@ class Document:
                     return text
             except ValueError:
                 continue
-        raise RenderError(f"{source}: the edit cannot be written as YAML that reads back as it")
+        raise RenderError(
+            f"{source}: the edit cannot be written so that it reads back as made (a part the "
+            "file shares through a YAML anchor, &name, would change wherever it is used); "
+            "edit that part of the file by hand"
+        )
 
 
 def above_blank_lines(base: list[str], edited: list[str]) -> list[str]:

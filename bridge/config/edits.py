@@ -55,39 +55,52 @@ Id = Annotated[str, StringConstraints(min_length=1, max_length=MAX_ID)]
 Make = Callable[[Any, Any], Any]  # (plain value, its sibling or None) -> a document node
 
 
-def _bounded(value: Any, where: str, depth: int = 0) -> int:
-    """The values in ``value`` (ValueError naming ``where`` past a bound)."""
-    if depth > MAX_DEPTH:
-        raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels")
+def _bounded(value: Any, section: str) -> None:
+    """ValueError naming the place of the first value past a bound (walked breadth first,
+    each container's size checked before its entries, so a huge input stops early)."""
+    queue: list[tuple[Any, str, int]] = [(value, section, 0)]
+    for item, where, depth in queue:
+        if len(queue) > MAX_NODES:
+            raise ValueError(f"{section}: more than {MAX_NODES} values")
+        if depth > MAX_DEPTH:
+            raise ValueError(f"{where}: nested more than {MAX_DEPTH} levels")
+        if isinstance(item, list | dict) and len(item) > MAX_ITEMS:
+            raise ValueError(f"{where}: at most {MAX_ITEMS} entries (got {len(item)})")
+        if isinstance(item, dict):
+            for key in item:
+                if not _scalar_key(key):
+                    raise ValueError(f"{where}: keys are text of at most 200 characters or numbers")
+            queue += [(v, f"{where}.{k}", depth + 1) for k, v in item.items()]
+        elif isinstance(item, list):
+            queue += [(v, f"{where}.{i}", depth + 1) for i, v in enumerate(item)]
+        else:
+            _check_scalar(item, where, depth)
+
+
+def _scalar_key(key: object) -> bool:
+    if isinstance(key, str):
+        return len(key) <= 200
+    return isinstance(key, int) and not isinstance(key, bool) and abs(key) < 2**63
+
+
+def _check_scalar(value: object, where: str, depth: int) -> None:
     if isinstance(value, str):
         limit = _LIMITS.get(where.rsplit(".", 1)[-1], MAX_TEXT) if depth <= 1 else MAX_TEXT
         if len(value) > limit:
             raise ValueError(f"{where}: at most {limit} characters (got {len(value)})")
-        return 1
-    if isinstance(value, float) and not math.isfinite(value):
+    elif isinstance(value, float) and not math.isfinite(value):
         raise ValueError(f"{where}: not a finite number")
-    if value is None or isinstance(value, bool | int | float):
-        return 1
-    if isinstance(value, list | dict) and len(value) > MAX_ITEMS:
-        raise ValueError(f"{where}: at most {MAX_ITEMS} entries (got {len(value)})")
-    if isinstance(value, list):
-        return 1 + sum(_bounded(v, f"{where}.{i}", depth + 1) for i, v in enumerate(value))
-    if isinstance(value, dict):
-        total = 1
-        for key, item in value.items():
-            if not isinstance(key, str | int) or isinstance(key, bool) or len(str(key)) > 200:
-                raise ValueError(f"{where}: keys are text or numbers of at most 200 characters")
-            total += _bounded(item, f"{where}.{key}", depth + 1)
-        return total
-    raise ValueError(f"{where}: {type(value).__name__} is not a config value")
+    elif isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 2**63:
+        raise ValueError(f"{where}: a number beyond 64 bits")
+    elif value is not None and not isinstance(value, bool | int | float | str):
+        raise ValueError(f"{where}: {type(value).__name__} is not a config value")
 
 
 def _fields(value: dict[str, Any], known: frozenset[str], section: str) -> dict[str, Any]:
     unknown = sorted(set(value) - known)
     if unknown:
         raise ValueError(f"{section}.{unknown[0][:MAX_ID]}: not a field (have {sorted(known)})")
-    if _bounded(value, section) > MAX_NODES:
-        raise ValueError(f"{section}: more than {MAX_NODES} values")
+    _bounded(value, section)
     return value
 
 
@@ -123,8 +136,7 @@ class EditDevice(_Change):
                 raise ValueError(
                     f"device.{path[:MAX_ID]}: not a device field (have {sorted(_DEVICE_FIELDS)})"
                 )
-        if _bounded(value, "device") > MAX_NODES:
-            raise ValueError(f"device: more than {MAX_NODES} values")
+        _bounded(value, "device")
         return value
 
 

@@ -26,7 +26,6 @@ hidden: fit for the log.
 
 from __future__ import annotations
 
-import copy
 import difflib
 import hashlib
 import os
@@ -145,8 +144,8 @@ class ConfigStore:
             )
         source = str(self.path)
         document = Document.parse(read.text, source)
-        expected = copy.deepcopy(read.data)
-        make_change(expected, change, lambda value, _: copy.deepcopy(value))
+        expected = _unshared(read.data)  # an anchor's uses are copies: only one changes
+        make_change(expected, change, lambda value, _: _unshared(value))
         make_change(document.root, change, document.node)
         try:
             text = document.render(expected, source)
@@ -159,6 +158,15 @@ class ConfigStore:
             field, _, message = first.partition(": ")
             raise ConfigEditError(message, field, exc.issues) from None
         return text, loaded, read
+
+
+def _unshared(data: Any) -> Any:
+    """A copy of plain data in which no dict or list is in two places (YAML aliases)."""
+    if isinstance(data, dict):
+        return {key: _unshared(value) for key, value in data.items()}
+    if isinstance(data, list):
+        return [_unshared(item) for item in data]
+    return data
 
 
 def _renamed(change: AnyChange) -> tuple[str, str] | None:
@@ -199,7 +207,8 @@ def _write(path: Path, expected: bytes, new: bytes) -> None:
     """``new`` in place of ``path`` if it still holds ``expected``: ConfigConflictError
     otherwise; ConfigWriteError if the disk refuses (the file as it was, no temp left)."""
     try:
-        on_disk = path.read_bytes()
+        with path.open("rb") as file:
+            on_disk = file.read(MAX_FILE_BYTES + 1)
         info = path.stat()
     except OSError as exc:
         raise ConfigWriteError(f"cannot read {path} again: {exc.strerror}") from None

@@ -333,6 +333,34 @@ REFUSED = [
     ),
     ({"kind": "drop_table", "id": "x"}, "", "kind"),
     ("not a change", "", "valid dictionary"),
+    (
+        {
+            "kind": "add_device",
+            "device": {"id": "m", "options": {f"k{i}": [1] * 200 for i in range(200)}},
+        },
+        "device",
+        "more than 2000 values",
+    ),
+    (
+        {"kind": "edit_device", "id": "borehole_pump", "set": {"options.family": list(range(300))}},
+        "device.options.family",
+        "at most 256 entries",
+    ),
+    (
+        {"kind": "edit_device", "id": "borehole_pump", "set": {"unit": 10**30}},
+        "device.unit",
+        "beyond 64 bits",
+    ),
+    (
+        {
+            "kind": "edit_device",
+            "id": "borehole_pump",
+            "set": {f"options.k{i}": "a" for i in range(65)},
+        },
+        "set",
+        "at most 64",
+    ),
+    ({"kind": "edit_device", "id": "borehole_pump", "set": {}}, "set", "at least 1"),
 ]
 
 
@@ -350,6 +378,26 @@ def test_a_refused_edit_names_its_field_and_writes_nothing(
     assert len(str(refused.value)) < 2000  # a 1 MB input is not echoed back
     assert config.read_bytes() == before
     assert folder_files(config) == files  # no backup, no temp file
+
+
+def test_an_edit_of_a_shared_anchor_is_refused_not_spread(tmp_path: Path) -> None:
+    path = tmp_path / "config.yaml"
+    path.write_text(
+        "buses: [{id: gw, transport: tcp, host: 127.0.0.1}]\n"
+        "devices:\n"
+        "  - {id: a, bus: gw, unit: 1, mapping: p2_vfd, poll: &poll {fast: 5s}}\n"
+        "  - {id: b, bus: gw, unit: 2, mapping: p2_vfd, poll: *poll}\n",
+        encoding="utf-8",
+    )
+    before = path.read_bytes()
+    with pytest.raises(ConfigEditError, match="YAML anchor"):
+        apply(path, {"kind": "edit_device", "id": "a", "set": {"poll.fast": "9s"}})
+    assert path.read_bytes() == before
+    after = apply(path, {"kind": "edit_device", "id": "a", "set": {"unit": 3}})  # the rest works
+    assert changed(before.decode(), after) == (
+        ["  - {id: a, bus: gw, unit: 1, mapping: p2_vfd, poll: &poll {fast: 5s}}"],
+        ["  - {id: a, bus: gw, unit: 3, mapping: p2_vfd, poll: &poll {fast: 5s}}"],
+    )
 
 
 def test_a_file_changed_on_disk_is_not_overwritten(config: Path) -> None:
