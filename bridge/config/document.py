@@ -12,10 +12,8 @@ the user wrote it outside the edit. The result must read back, with the loader's
 
 from __future__ import annotations
 
-import difflib
 import io
 import itertools
-from collections.abc import Sequence
 from typing import Any
 
 import yaml
@@ -24,6 +22,7 @@ from ruamel.yaml.comments import CommentedMap, CommentedSeq
 from ruamel.yaml.error import YAMLError
 from ruamel.yaml.scalarstring import DoubleQuotedScalarString
 
+from bridge.config.lines import above_blank_lines, changed_lines, merge_lines
 from bridge.core.yaml_source import parse_yaml
 
 _INDENTS = tuple(
@@ -33,6 +32,25 @@ _INDENTS = tuple(
 )
 _RESOLVER = yaml.resolver.Resolver()
 _STR = "tag:yaml.org,2002:str"
+
+
+def _guessed_indent(lines: list[str]) -> tuple[int, int, int]:
+    """The indentation the user's lines suggest: (mapping, sequence, dash offset)."""
+    mapping = next((_indent(line) for line in lines if _indent(line) and _content(line)), 2)
+    dashes = [_indent(line) for line in lines if line.lstrip().startswith("- ")]
+    offset = min(dashes, default=0)
+    return (
+        (mapping if mapping in (2, 4) else 2, offset + 2, offset) if offset in (0, 2) else (2, 4, 2)
+    )
+
+
+def _indent(line: str) -> int:
+    return len(line) - len(line.lstrip(" "))
+
+
+def _content(line: str) -> bool:
+    stripped = line.strip()
+    return bool(stripped) and not stripped.startswith(("#", "- "))
 
 
 def _read_as(text: str) -> str:
@@ -75,15 +93,17 @@ class Document:
         try:
             parse_yaml(text, source)  # the loader's reading (duplicate keys refused)
             best: tuple[int, Document] | None = None
-            for indent in _INDENTS:
+            lines = text.splitlines()
+            guess = _guessed_indent(lines)
+            for indent in sorted(_INDENTS, key=lambda candidate: candidate != guess):
                 handler = _yaml(indent)
                 root = handler.load(text)
                 if not isinstance(root, CommentedMap):
                     raise ValueError(f"{source}: the file must hold a mapping")
                 base = _dump(handler, root)
-                changed = _changed_lines(text, base)
+                changed = changed_lines(lines, base.splitlines())
                 if best is None or changed < best[0]:
-                    best = (changed, cls(text, handler.load(text), handler, base))
+                    best = (changed, cls(text, root, handler, base))
                 if changed == 0:
                     break
         except YAMLError as exc:
@@ -128,80 +148,3 @@ class Document:
             "file shares through a YAML anchor, &name, would change wherever it is used); "
             "edit that part of the file by hand"
         )
-
-
-def above_blank_lines(base: list[str], edited: list[str]) -> list[str]:
-    """``edited`` with each block of added lines moved up above the blank and comment lines
-    before it: ruamel writes a new key or entry after the blank line and comments that close
-    the one before, which belong to what follows."""
-    result: list[str] = []
-    matcher = difflib.SequenceMatcher(None, base, edited, autojunk=False)
-    for tag, _, _, j1, j2 in matcher.get_opcodes():
-        if tag != "insert":
-            result += edited[j1:j2]
-            continue
-        keep = len(result)
-        while keep > 0 and (not result[keep - 1].strip() or result[keep - 1].lstrip()[0] == "#"):
-            keep -= 1
-        result[keep:keep] = edited[j1:j2]
-    return result
-
-
-def _changed_lines(text: str, other: str) -> int:
-    matcher = difflib.SequenceMatcher(None, text.splitlines(), other.splitlines(), autojunk=False)
-    return sum(
-        max(i2 - i1, j2 - j1) for tag, i1, i2, j1, j2 in matcher.get_opcodes() if tag != "equal"
-    )
-
-
-def merge_lines(user: list[str], base: list[str], edited: list[str]) -> list[str]:
-    """The changes from ``base`` to ``edited`` made to ``user`` (``base`` in the user's
-    layout). Where a change meets lines the user laid out otherwise, the edited lines of
-    that stretch win."""
-    user_hunks = _hunks(base, user)
-    edit_ops = difflib.SequenceMatcher(None, base, edited, autojunk=False).get_opcodes()
-    edit_hunks = [(i1, i2, edited[j1:j2], 1) for tag, i1, i2, j1, j2 in edit_ops if tag != "equal"]
-    result: list[str] = []
-    position = 0
-    for start, end, lines, members in _clusters(sorted(user_hunks + edit_hunks)):
-        result += base[position:start]
-        if members > 1:  # both changed this stretch: the edit's version of it
-            result += edited[_mapped(edit_ops, start) : _mapped(edit_ops, end)]
-        else:
-            result += lines
-        position = end
-    return result + base[position:]
-
-
-def _hunks(base: list[str], other: list[str]) -> list[tuple[int, int, list[str], int]]:
-    matcher = difflib.SequenceMatcher(None, base, other, autojunk=False)
-    return [
-        (i1, i2, other[j1:j2], 0) for tag, i1, i2, j1, j2 in matcher.get_opcodes() if tag != "equal"
-    ]
-
-
-def _clusters(
-    hunks: list[tuple[int, int, list[str], int]],
-) -> list[tuple[int, int, list[str], int]]:
-    """Hunks (sorted) grouped where they touch the same base lines: (start, end, the lines
-    of a lone hunk, how many hunks)."""
-    clusters: list[tuple[int, int, list[str], int]] = []
-    for start, end, lines, _ in hunks:
-        if clusters:
-            c_start, c_end, c_lines, count = clusters[-1]
-            inserts = start == end and c_start == c_end == start
-            if start < c_end or (start == end and c_start < start < c_end) or inserts:
-                clusters[-1] = (c_start, max(c_end, end), c_lines, count + 1)
-                continue
-        clusters.append((start, end, lines, 1))
-    return clusters
-
-
-def _mapped(ops: Sequence[tuple[str, int, int, int, int]], position: int) -> int:
-    """The line of the edited text at ``position`` of the base (a hunk's edge)."""
-    for tag, i1, i2, j1, j2 in ops:
-        if i1 <= position <= i2:
-            if tag == "equal":
-                return j1 + position - i1
-            return j1 if position == i1 else j2
-    return sum(j2 - j1 for _, _, _, j1, j2 in ops)
