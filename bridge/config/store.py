@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bridge.config.document import Document, RenderError
+from bridge.config.document import Document
 from bridge.config.edits import AddBus, AddDevice, EditDevice, RemoveDevice, describe, make_change
 from bridge.config.loading import LoadedConfig, load_config_data
 from bridge.config.redaction import change_rows, public_data, redact_text
@@ -143,19 +143,20 @@ class ConfigStore:
                 f"the config is {self._reason}, not a file the page may write; change it there"
             )
         source = str(self.path)
-        document = Document.parse(read.text, source)
         expected = _unshared(read.data)  # an anchor's uses are copies: only one changes
         make_change(expected, change, lambda value, _: _unshared(value))
-        make_change(document.root, change, document.node)
         try:
+            document = Document.parse(read.text, source)
+            make_change(document.root, change, document.node)
             text = document.render(expected, source)
-        except RenderError as exc:
+        except ValueError as exc:  # RenderError, or YAML ruamel reads otherwise than PyYAML
             raise ConfigEditError(str(exc)) from None
         try:
             loaded = load_config_data(parse_yaml(text, source), self.path)
         except ConfigError as exc:
-            first = exc.issues[0]
-            field, _, message = first.partition(": ")
+            field, sep, message = exc.issues[0].partition(": ")
+            if not sep:
+                field, message = "", exc.issues[0]
             raise ConfigEditError(message, field, exc.issues) from None
         return text, loaded, read
 

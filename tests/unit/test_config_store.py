@@ -436,3 +436,25 @@ def test_preview_validates_and_writes_nothing(config: Path) -> None:
         store.preview(
             parse_change({"kind": "edit_device", "id": "borehole_pump", "set": {"unit": 2}})
         )
+
+
+GOOD_EXAMPLES = sorted(p for p in EXAMPLES.glob("*.yaml") if p.name != "bad.yaml")
+
+
+@pytest.mark.parametrize("example", GOOD_EXAMPLES, ids=lambda p: p.name)
+def test_every_device_of_every_example_renames_in_its_own_lines(
+    example: Path, tmp_path: Path
+) -> None:
+    path = tmp_path / example.name
+    original = example.read_text(encoding="utf-8")
+    devices = load_config(example).config.devices
+    for device in devices:
+        path.write_text(original, encoding="utf-8")
+        after = apply(path, {"kind": "edit_device", "id": device.id, "set": {"name": "Renamed"}})
+        removed, added = changed(original, after)
+        assert len(removed) <= 2 and len(added) == 1, (device.id, removed, added)
+        renamed = load_config(path).config.devices
+        assert [d.model_copy(update={"name": None}) for d in renamed] == [
+            d.model_copy(update={"name": None}) for d in devices
+        ]
+        assert next(d.name for d in renamed if d.id == device.id) == "Renamed"
