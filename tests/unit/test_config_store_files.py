@@ -19,7 +19,7 @@ import pytest
 
 from bridge.config import load_config, load_config_data
 from bridge.config.edits import SECRET_MARK, parse_change
-from bridge.config.store import BACKUPS, ConfigStore
+from bridge.config.store import BACKUPS, GENERATED, ConfigStore
 from bridge.errors import ConfigConflictError, ConfigReadOnlyError, ConfigWriteError
 
 ROOT = Path(__file__).parents[2]
@@ -199,6 +199,22 @@ def test_a_config_that_is_no_file_is_read_only(tmp_path: Path) -> None:
     assert BROKER not in json.dumps(view)
     assert view["devices"][0]["id"] == "pump"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_generated_file_is_read_only(config: Path) -> None:
+    text = config.read_text(encoding="utf-8")
+    config.write_text(
+        f"{GENERATED}the add-on's options (/data/options.json)\n{text}", encoding="utf-8"
+    )
+    before = config.read_bytes()
+    store = ConfigStore.open(config)
+    assert not store.writable
+    with pytest.raises(ConfigReadOnlyError) as refused:
+        store.apply(rename("x"))
+    assert "generated from the add-on's options (/data/options.json)" in refused.value.message
+    assert store.public_view()["devices"][0]["id"] == "borehole_pump"
+    assert config.read_bytes() == before
+    assert sorted(os.listdir(config.parent)) == ["config.yaml"]
 
 
 def test_a_linked_config_is_written_where_the_link_leads(config: Path) -> None:
