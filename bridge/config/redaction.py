@@ -16,12 +16,10 @@ from bridge.config.edits import SECRET_KEYS, SECRET_MARK
 
 _URL_PASSWORD = re.compile(r"(://[^/\s:@]*:)[^@/\s]*@")
 _KEYS = "|".join(sorted(SECRET_KEYS, key=len, reverse=True))
-_KEY_VALUE = re.compile(
-    rf"(?<![\w-])(['\"]?(?:{_KEYS})['\"]?\s*:)([ \t]+)([^,}}\]#\n]*[^,}}\]#\s])"
-)
-_BLOCK_START = re.compile(
-    rf"^(\s*)(?:-\s+)?['\"]?(?:{_KEYS})['\"]?\s*:\s*(?:[|>][-+0-9]*)?\s*(?:#.*)?$"
-)
+_KEY = rf"['\"]?(?:{_KEYS})['\"]?\s*:"
+_QUOTED = r"\"(?:[^\"\\\n]|\\.)*\"?|'(?:[^'\n]|'')*'?"  # a quote not closed runs to the end
+_BLOCK_KEY = re.compile(rf"^(\s*(?:-\s+)?)({_KEY})(?=\s|$)[ \t]*({_QUOTED}|.*?)(\s+#.*)?$")
+_FLOW_KEY = re.compile(rf"([{{,]\s*{_KEY}[ \t]+)({_QUOTED}|[^,}}\]\n]*?)(?=\s*[,}}\]]|\s+#|\s*$)")
 MAX_ROWS = 40  # rows of a change summary; more are counted
 
 
@@ -40,20 +38,27 @@ def public_data(data: Any) -> Any:
 
 
 def redact_text(text: str) -> str:
-    """Config text with secret values replaced (block scalars of a secret key too)."""
+    """Config text with secret values replaced, line by line (the lines stay the lines):
+    ``key: value`` (quoted or plain, a comment after it kept), the lines that continue it
+    (a block scalar, a multi-line string), ``{key: value}`` in a flow mapping, and the
+    password of a URL."""
     lines = []
-    block_indent: int | None = None
+    column: int | None = None  # lines indented past it continue a secret's value
     for line in text.splitlines(keepends=True):
-        indent = len(line) - len(line.lstrip(" "))
-        if block_indent is not None and (not line.strip() or indent > block_indent):
-            lines.append(" " * indent + SECRET_MARK + "\n" if line.strip() else line)
+        body, end = line.rstrip("\r\n"), line[len(line.rstrip("\r\n")) :]
+        indent = len(body) - len(body.lstrip(" "))
+        if column is not None and (not body.strip() or indent > column):
+            lines.append((" " * indent + SECRET_MARK if body.strip() else body) + end)
             continue
-        block_indent = None
-        start = _BLOCK_START.match(line)
-        if start is not None:
-            block_indent = len(start.group(1))
-        hidden = _KEY_VALUE.sub(rf"\g<1>\g<2>{SECRET_MARK}", line)
-        lines.append(_URL_PASSWORD.sub(rf"\g<1>{SECRET_MARK}@", hidden))
+        column = None
+        block = _BLOCK_KEY.match(body)
+        if block is not None:
+            column = len(block.group(1))
+            value, comment = block.group(3), block.group(4) or ""
+            shown = value if not value or value[0] in "|>" else SECRET_MARK
+            body = f"{block.group(1)}{block.group(2)} {shown}".rstrip() + comment
+        body = _FLOW_KEY.sub(rf"\g<1>{SECRET_MARK}", body)
+        lines.append(_URL_PASSWORD.sub(rf"\g<1>{SECRET_MARK}@", body) + end)
     return "".join(lines)
 
 
