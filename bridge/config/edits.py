@@ -9,8 +9,8 @@ made to a document (plain data or the round-trip YAML: both are dicts and lists)
     AddBus(bus={...})                    a serial or TCP bus appended to ``buses``
 
 Every field is bounded before anything reads it (ids 64 characters, a name 100, any text
-1024, a few hundred items, four levels deep); what the values mean is checked by the
-loader, as ``check`` does. A secret left out of an edit, or given as ``SECRET_MARK`` (what
+1024 and no control character, a few hundred items, four levels deep); what the values
+mean is checked by the loader, as ``check`` does. A secret left out of an edit, or given as ``SECRET_MARK`` (what
 the store's view shows), keeps the file's value. ``parse_change`` reads one from JSON data.
 """
 
@@ -49,6 +49,7 @@ SECRET_KEYS = frozenset(
 _DEVICE_FIELDS = frozenset(DeviceConfig.model_fields)
 _BUS_FIELDS = frozenset(SerialBus.model_fields) | frozenset(TcpBus.model_fields)
 _LIMITS = {"id": MAX_ID, "bus": MAX_ID, "name": MAX_NAME}
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
 _PATH = re.compile(r"^[a-z_]+(\.[^.\s]{1,200}){0,3}$")
 
 Id = Annotated[str, StringConstraints(min_length=1, max_length=MAX_ID)]
@@ -79,7 +80,7 @@ def _bounded(value: Any, section: str) -> None:
 
 def _scalar_key(key: object) -> bool:
     if isinstance(key, str):
-        return len(key) <= 200
+        return len(key) <= 200 and not _CONTROL.search(key)
     return isinstance(key, int) and not isinstance(key, bool) and abs(key) < 2**63
 
 
@@ -88,6 +89,8 @@ def _check_scalar(value: object, where: str, depth: int) -> None:
         limit = _LIMITS.get(where.rsplit(".", 1)[-1], MAX_TEXT) if depth <= 1 else MAX_TEXT
         if len(value) > limit:
             raise ValueError(f"{where}: at most {limit} characters (got {len(value)})")
+        if _CONTROL.search(value):
+            raise ValueError(f"{where}: no control characters (line breaks, tabs, NUL)")
     elif isinstance(value, float) and not math.isfinite(value):
         raise ValueError(f"{where}: not a finite number")
     elif isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 2**63:

@@ -236,7 +236,33 @@ def test_crlf_lines_stay_crlf(config: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    "name", ["on", "yes", "No", "0755", "12:30", "null", "~", "1e3", "true", "- x", "a: b"]
+    "name",
+    [
+        "on",
+        "yes",
+        "No",
+        "0755",
+        "12:30",
+        "null",
+        "~",
+        "1e3",
+        "true",
+        "- x",
+        "a: b",
+        "!!python/object:os.system",
+        "*x",
+        "&a",
+        "{a: 1}",
+        "[1]",
+        "'q'",
+        '"dq"',
+        "#hash",
+        "a #b",
+        "%TAG",
+        " lead",
+        "trail ",
+        "\\",
+    ],
 )
 def test_a_name_yaml_would_read_as_something_else_is_written_quoted(
     config: Path, name: str

@@ -170,6 +170,21 @@ REFUSED = [
         "at most 64",
     ),
     ({"kind": "edit_device", "id": "borehole_pump", "set": {}}, "set", "at least 1"),
+    (
+        {"kind": "edit_device", "id": "borehole_pump", "set": {"name": "a\x00b"}},
+        "device.name",
+        "no control",
+    ),
+    (
+        {"kind": "edit_device", "id": "borehole_pump", "set": {"name": "two\nlines"}},
+        "device.name",
+        "no control",
+    ),
+    (
+        {"kind": "edit_device", "id": "borehole_pump", "set": {"options": {"a\nb": "x"}}},
+        "device.options",
+        "keys are text",
+    ),
 ]
 
 
