@@ -10,8 +10,9 @@ made to a document (plain data or the round-trip YAML: both are dicts and lists)
 
 Every field is bounded before anything reads it (ids 64 characters, a name 100, any text
 1024 and no control character, a few hundred items, four levels deep); what the values
-mean is checked by the loader, as ``check`` does. A secret left out of an edit, or given as ``SECRET_MARK`` (what
-the store's view shows), keeps the file's value. ``parse_change`` reads one from JSON data.
+mean is checked by the loader, as ``check`` does. A secret left out of an edit, or given
+as ``SECRET_MARK`` (what the store's view shows), keeps the file's value. ``parse_change``
+reads one from JSON data.
 """
 
 from __future__ import annotations
