@@ -284,6 +284,8 @@ class WebApp:
         try:
             return _json(search(rows, request.query.get("q", "")))
         except QueryError as exc:
+            who = self.access.who(request)
+            log.warning("web page: library search refused (%s): 400 %s", who, exc)
             return _error(HTTPStatus.BAD_REQUEST, str(exc))
 
     async def _add(self, request: Request, step: str) -> Response:
