@@ -59,6 +59,7 @@ FRESH = 0.25  # seconds an overview (or a fetched device page) is served again a
 COMMISSIONING = frozenset({"device/scan", "device/identify", "device/read", "device/write"})
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
+    "/add.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
 }
 ADDING = {"/api/add/scan": "scan", "/api/add/identify": "identify", "/api/trial": "trial"}
