@@ -20,7 +20,7 @@ from bridge.modbus.ports import serial_ports
 from bridge.mqtt import MqttClient
 from bridge.web.http import BODY_LIMIT
 from bridge.web.library import MAX_RESULTS
-from tests.integration.harness import serving_tcp, simulator
+from tests.integration.harness import eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.web import (
     PUMP,
@@ -240,7 +240,7 @@ async def test_hostile_input_to_every_new_endpoint(
             lines = web_lines(caplog)[before:]
             assert len(lines) == 1, (row.id, [r.getMessage() for r in lines])
             assert len(lines[0].getMessage()) < 600, row.id  # no 1 MB log line either
-            assert not sim.reads(NEW_UNIT) and not sim.writes and not s.sim.writes, row.id
+            assert not sim.requests and not s.sim.writes, row.id  # none sent there, none written
 
 
 async def ask(port: int, method: str, path: str, body: object, headers: dict[str, str]) -> Answer:
@@ -262,3 +262,23 @@ async def ask(port: int, method: str, path: str, body: object, headers: dict[str
 
 def web_lines(caplog: pytest.LogCaptureFixture) -> list[logging.LogRecord]:
     return [r for r in caplog.records if r.name.startswith("bridge.web")]
+
+
+@pytest.mark.asyncio
+@pytest.mark.timeout(60)
+async def test_a_new_bus_serves_one_request_at_a_time_and_is_closed_after_it(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path) as s, new_bus() as (sim, bus):
+        # unit 5 answers first, then 35 silent units: the scan holds the bus 3.5 s at least
+        long = {"bus": bus, "units": f"{NEW_UNIT}-40", "timeout": 0.1}
+        first = asyncio.create_task(http(s.port, "POST", SCAN, long))
+        await eventually(lambda: sim.requests, timeout=10)
+        ask = {"bus": bus, "unit": NEW_UNIT, "mapping": "nastec_vasco"}
+        second = await http(s.port, "POST", TRIAL, ask)
+        assert second.status == 429 and "another request uses this bus" in second.json()["error"]
+        done = await first
+        assert done.status == 200, done.body
+        assert [f["unit"] for f in done.json()["data"]["found"]] == [NEW_UNIT]
+        again = await http(s.port, "POST", TRIAL, ask)  # closed after the scan: free again
+        assert again.status == 200 and again.json()["data"]["read"] > 0
