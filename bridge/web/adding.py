@@ -122,10 +122,8 @@ class Adding:
             async with self.buses.opened(chosen) as scheduler:
                 found = await scan(scheduler_submit(scheduler, Priority.POLL), units, timeout)
             data = {"bus": NEW_BUS, "probed": len(units), "found": [_found(f) for f in found]}
-        return (
-            data,
-            f"scanned {len(units)} units on bus {data['bus']}: {len(data['found'])} answered",
-        )
+        answered = len(data["found"])
+        return data, f"scanned {_units_said(units)} on bus {data['bus']}: {answered} answered"
 
     async def identify(self, body: bytes) -> tuple[dict[str, Any], str]:
         """What each unit is (read-only probes); the answer's data and one log line."""
@@ -143,7 +141,8 @@ class Adding:
                 found = await identify(submit, units, library, timeout, NEW_BUS, read_timeout=wait)
             data = {"bus": NEW_BUS, "probed": len(units), "found": [i.as_dict() for i in found]}
         said = ", ".join(f"{f['unit']}: {f['summary']}" for f in data["found"][:5])
-        return data, f"identified {len(units)} units on bus {data['bus']}: {said or 'none'}"
+        where = f"{_units_said(units)} on bus {data['bus']}"
+        return data, f"identified {where}: {said or 'none answered'}"
 
     async def _management(
         self, command: str, chosen: ChosenBus, units: list[int], timeout: float | None
@@ -229,6 +228,10 @@ def _units(spec: str | list[int]) -> list[int]:
         return parse_units(spec)
     except RequestError as exc:
         raise AskError(HTTPStatus.BAD_REQUEST, str(exc)) from None
+
+
+def _units_said(units: list[int]) -> str:
+    return f"unit {units[0]}" if len(units) == 1 else f"{len(units)} units"
 
 
 def _device(ask: TrialAsk, bus_id: str) -> DeviceConfig:

@@ -25,6 +25,7 @@ from tests.integration.mosquitto import Broker
 from tests.integration.web import (
     PUMP,
     STARTER,
+    TOKEN,
     Answer,
     http,
     parse_answer,
@@ -282,3 +283,23 @@ async def test_a_new_bus_serves_one_request_at_a_time_and_is_closed_after_it(
         assert [f["unit"] for f in done.json()["data"]["found"]] == [NEW_UNIT]
         again = await http(s.port, "POST", TRIAL, ask)  # closed after the scan: free again
         assert again.status == 200 and again.json()["data"]["read"] > 0
+
+
+@pytest.mark.asyncio
+async def test_behind_ingress_the_log_names_the_home_assistant_user(
+    mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="bridge.web")
+    async with site(mosquitto, tmp_path, token=TOKEN, ingress_proxies=["127.0.0.2"]) as s:
+        user = {"X-Remote-User-Name": "alice", "Origin": "http://homeassistant.local:8123"}
+        scan = {"bus": "tcp", "units": [STARTER]}
+        proxied = await http(s.port, "POST", SCAN, scan, user, source="127.0.0.2")
+        assert proxied.status == 200, proxied.body
+        assert "scanned unit 3 on bus tcp: 1 answered (alice via ingress)" in caplog.text
+        # a user header from anyone else is not believed (nor is the request let in)
+        claimed = await http(s.port, "POST", SCAN, scan, user, source="127.0.0.1")
+        assert claimed.status == 401
+        bearer = {"Authorization": f"Bearer {TOKEN}", "X-Remote-User-Name": "mallory"}
+        direct = await http(s.port, "POST", SCAN, scan, bearer, source="127.0.0.1")
+        assert direct.status == 200
+        assert "mallory" not in caplog.text and "1 answered (127.0.0.1)" in caplog.text
