@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 
 from bridge.config import MqttConfig
-from bridge.core.mapping import builtin_mapping_names
+from bridge.core.mapping import builtin_mapping_names, shipped_library
 from bridge.modbus.ports import serial_ports
+from bridge.modbus.simulator import Quirks
 from bridge.mqtt import MqttClient
 from bridge.web.http import BODY_LIMIT
 from bridge.web.library import MAX_RESULTS
@@ -152,6 +153,8 @@ async def test_a_bus_not_configured_yet_is_opened_for_each_request_only(
         (pump,) = identified["found"]
         assert pump["matches"] and pump["matches"][0]["mapping"] == "nastec_vasco", pump
 
+        dc_bus = shipped_library()["nastec_vasco"].points({})["dc_bus_voltage"]
+        sim.set_quirks(NEW_UNIT, Quirks(refused=frozenset({dc_bus.address})))
         ask = {"bus": bus, "unit": NEW_UNIT, "mapping": "nastec_vasco", "name": "Well pump"}
         trial = await http(s.port, "POST", "/api/trial", ask)
         assert trial.status == 200, trial.body
@@ -161,6 +164,8 @@ async def test_a_bus_not_configured_yet_is_opened_for_each_request_only(
         assert current["unit"] == "A" and current["value"] == pytest.approx(
             sim.value(NEW_UNIT, "motor_current")
         )
+        assert {"table": "holding", "address": dc_bus.address} in result["refused"]
+        assert next(v for v in result["values"] if v["key"] == "dc_bus_voltage")["value"] is None
         assert not sim.writes and not s.sim.writes
 
         silent = {**ask, "unit": NEW_UNIT + 1}

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.mapping import shipped_library
+from bridge.modbus.simulator import Quirks
 from tests.integration.browser import CHROMIUM, Page, browser
 from tests.integration.mosquitto import Broker
 from tests.integration.test_web_add import NEW_UNIT, new_bus
@@ -67,10 +69,14 @@ async def test_a_technician_adds_a_device_from_a_scan_to_a_trial_poll(
         )
 
         sim.set_value(NEW_UNIT, "motor_current", 7.5)
+        dc_bus = shipped_library()["nastec_vasco"].points({})["dc_bus_voltage"]
+        sim.set_quirks(NEW_UNIT, Quirks(refused=frozenset({dc_bus.address})))
         await page.evaluate("document.querySelector('#add-device-form button').click()")
         current = '#add-values tr[data-key="motor_current"]'
         await page.until(f"{text(current + ' .value')} === '7.5'", timeout=30)
         assert await page.evaluate(text(current + " td:nth-child(3)")) == "A"
+        refused = await page.evaluate(text("#add-refused"))
+        assert refused == f"Refused by the device: holding {dc_bus.address}", refused
         status = await page.evaluate(text("#add-trial-status"))
         assert status.startswith("Nastec VASCO") and "values read" in status, status
         assert not sim.writes and not s.sim.writes
