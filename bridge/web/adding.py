@@ -38,7 +38,7 @@ from bridge.modbus.trial import TRIAL_LIMIT, trial_poll
 from bridge.web.new_bus import NEW_BUS, AskError, ChosenBus, TemporaryBuses
 from bridge.web.views import value_row
 
-TRIAL_ID = "trial"  # the id of a trial device not given one
+TRIAL_ID = "trial"  # the trial device's id in the log: "trial-<id given>" or "trial"
 Text = Annotated[str, StringConstraints(min_length=1, max_length=100)]
 BusChoice = Annotated[str, StringConstraints(min_length=1, max_length=64)] | dict[str, Any]
 Units = (
