@@ -16,8 +16,11 @@ import pytest
 
 from bridge.config import MqttConfig
 from bridge.core.mapping import builtin_mapping_names, shipped_library
+from bridge.errors import ValueRejectedError
+from bridge.modbus.commission import raw_write
 from bridge.modbus.ports import serial_ports
 from bridge.modbus.simulator import Quirks
+from bridge.modbus.trial import ReadsOnly
 from bridge.mqtt import MqttClient
 from bridge.web.http import BODY_LIMIT
 from bridge.web.library import MAX_RESULTS
@@ -102,6 +105,11 @@ async def test_scan_identify_and_try_on_a_configured_bus(
         assert any(v["unit"] for v in data["values"] if v["value"] is not None)
         assert set(s.bridge.engine.devices) == devices  # nothing added to the running bridge
         assert not [t for t in seen if "new_starter" in t]  # nothing published
+        assert not s.sim.writes
+        # and were a trial poller ever to write, its scheduler would refuse it unsent
+        reads_only = ReadsOnly(s.bridge.engine.schedulers["tcp"])
+        with pytest.raises(ValueRejectedError, match="only reads"):
+            await reads_only.submit(STARTER, raw_write("holding", 0x1001, [1]), timeout=1.0)
         assert not s.sim.writes
 
 
