@@ -7,6 +7,8 @@ the decoded values appear, with their units, and nothing was written or added.
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -21,6 +23,7 @@ from tests.integration.web import site
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)"
 )
+SCREENSHOTS = os.environ.get("BRIDGE_SCREENSHOTS")  # a folder: keep the screenshot there
 
 
 def text(selector: str) -> str:
@@ -81,3 +84,17 @@ async def test_a_technician_adds_a_device_from_a_scan_to_a_trial_poll(
         assert status.startswith("Nastec VASCO") and "values read" in status, status
         assert not sim.writes and not s.sim.writes
         assert set(s.bridge.engine.devices) == {"pump", "starter"}
+        shot = tmp_path / "web-add.png"
+        await page.screenshot(shot, 1200, 900)
+        assert shot.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+        if SCREENSHOTS:
+            shutil.copy(shot, Path(SCREENSHOTS) / shot.name)
+        # on a phone the page itself never scrolls sideways (wide tables scroll in place)
+        await page.send(
+            "Emulation.setDeviceMetricsOverride",
+            width=360,
+            height=740,
+            deviceScaleFactor=2,
+            mobile=True,
+        )
+        await page.until("document.documentElement.scrollWidth <= window.innerWidth")
