@@ -31,6 +31,10 @@ def library_row(name: str, mapping: Mapping) -> dict[str, Any]:
         "category": library.category.value if library is not None else "",
         "aliases": list(library.aliases) if library is not None else [],
         "transports": list(mapping.protocol.transports),
+        "options": {
+            name: {"description": o.description, "choices": list(o.choices), "default": o.default}
+            for name, o in mapping.options.items()
+        },
     }
 
 

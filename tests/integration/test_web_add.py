@@ -62,6 +62,7 @@ async def test_the_hosts_ports_and_the_library_searched(mosquitto: Broker, tmp_p
         assert [m["mapping"] for m in found["mappings"]] == ["nastec_vasco"]
         assert found["mappings"][0]["category"] == "pump"
         assert found["mappings"][0]["manufacturer"] == "Nastec"
+        assert found["mappings"][0]["options"]["family"]["choices"] == ["vasco", "mida"]
         meters = (await http(s.port, "GET", "/api/library?q=METER")).json()
         assert meters["total"] > 1
         assert all(

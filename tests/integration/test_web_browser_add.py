@@ -67,6 +67,11 @@ async def test_a_technician_adds_a_device_from_a_scan_to_a_trial_poll(
         # the one unit found is taken, with the mapping it was identified as
         await page.until("document.querySelector('#add-mapping').value === 'nastec_vasco'")
         assert await page.evaluate("document.querySelector('#add-unit').value") == str(NEW_UNIT)
+        # the mapping's model variants, each a choice with its default
+        family = "document.querySelector('#add-option-family')"
+        await page.until(f"{family}?.value === 'vasco'")
+        choices = await page.evaluate(f"[...{family}.options].map(o => o.value)")
+        assert choices == ["vasco", "mida"]
         assert await page.evaluate("document.querySelector('#add-id').value") == (
             f"nastec_vasco_{NEW_UNIT}"
         )

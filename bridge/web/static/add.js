@@ -3,7 +3,7 @@
 // formatValue, number). Every request only reads; nothing is saved by trying.
 "use strict";
 
-const adding = { ports: null, found: new Map(), searched: "", timer: 0, buses: "" };
+const adding = { ports: null, found: new Map(), searched: "", timer: 0, buses: "", mappings: new Map() };
 const NEW_SERIAL = "\u0000serial";
 const NEW_TCP = "\u0000tcp";
 
@@ -111,10 +111,37 @@ function useUnit(unit) {
 
 function suggestNames() {
   const option = $("#add-mapping").selectedOptions[0];
+  showOptions();
   if (!option) return;
   const unit = $("#add-unit").value.trim();
   if (!$("#add-id").dataset.edited) $("#add-id").value = `${option.value}_${unit}`.slice(0, 64);
   if (!$("#add-name").dataset.edited) $("#add-name").value = option.dataset.model || "";
+}
+
+// The chosen mapping's model variants (its options), each a choice of its own.
+function showOptions() {
+  const mapping = adding.mappings.get($("#add-mapping").value);
+  const box = $("#add-options");
+  if (box.dataset.mapping === (mapping ? mapping.mapping : "")) return;
+  box.dataset.mapping = mapping ? mapping.mapping : "";
+  box.replaceChildren(...Object.entries(mapping ? mapping.options : {}).map(([name, option]) => {
+    const field = el("span", null, "field");
+    const label = el("label", name.replaceAll("_", " "));
+    const select = el("select");
+    select.id = `add-option-${name}`;
+    select.dataset.option = name;
+    label.htmlFor = select.id;
+    label.title = option.description;
+    select.append(...option.choices.map((choice) => new Option(choice, choice, false, choice === option.default)));
+    field.append(label, select);
+    return field;
+  }));
+}
+
+function chosenOptions() {
+  const options = {};
+  for (const select of $("#add-options").querySelectorAll("select")) options[select.dataset.option] = select.value;
+  return options;
 }
 
 // --- the library -----------------------------------------------------------------------
@@ -125,12 +152,14 @@ async function searchLibrary(query) {
   if (adding.searched !== query) return;  // a newer search is on its way
   const select = $("#add-mapping");
   const kept = select.value;
+  for (const m of data.mappings) adding.mappings.set(m.mapping, m);
   select.replaceChildren(...data.mappings.map((m) => {
     const option = new Option(`${m.manufacturer} ${m.model} · ${m.category} (${m.mapping})`, m.mapping);
     option.dataset.model = `${m.manufacturer} ${m.model}`;
     return option;
   }));
   if (data.mappings.some((m) => m.mapping === kept)) select.value = kept;
+  showOptions();
   if (data.total > data.mappings.length) {
     select.append(new Option(`… ${data.total - data.mappings.length} more: narrow the search`, ""));
   }
@@ -140,7 +169,8 @@ async function searchLibrary(query) {
 
 function proposed() {
   const form = $("#add-device-form").elements;
-  const body = { bus: adding.bus ?? chosenBus(), unit: number(form.unit.value), mapping: form.mapping.value };
+  const body = { bus: adding.bus ?? chosenBus(), unit: number(form.unit.value), mapping: form.mapping.value,
+    options: chosenOptions() };
   if (form.name.value.trim()) body.name = form.name.value.trim();
   if (form.id.value.trim()) body.id = form.id.value.trim();
   return body;
