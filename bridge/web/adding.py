@@ -26,7 +26,12 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, Validation
 
 from bridge.config import DeviceConfig, LoadedConfig, SerialBus, load_device_mapping
 from bridge.core.management_request import MAX_SCAN_TIMEOUT, MAX_UNIT, RequestError, parse_units
-from bridge.core.mapping import builtin_mapping_names, format_validation_errors, shipped_library
+from bridge.core.mapping import (
+    Mapping,
+    builtin_mapping_names,
+    format_validation_errors,
+    shipped_library,
+)
 from bridge.core.state import published
 from bridge.management import Management
 from bridge.modbus.commission import Found, scan, scheduler_submit
@@ -182,23 +187,31 @@ class Adding:
         if mapping is None or problems:
             shown = [p.removeprefix(f"devices.{device.id}.") for p in problems[:5]]
             raise AskError(HTTPStatus.BAD_REQUEST, "; ".join(shown))
-        slot = chosen.bus.id if chosen.configured else ""
-        if slot in self._trials:
+        poller = await self._trial_on(chosen, device, mapping)
+        data = trial_document(poller, chosen.bus.id)
+        where = f"unit {ask.unit} on bus {chosen.bus.id}"
+        read, refused = data["read"], len(data["refused"])
+        return data, f"trial of {ask.mapping} at {where}: {read} values read, {refused} refused"
+
+    async def _trial_on(
+        self, chosen: ChosenBus, device: DeviceConfig, mapping: Mapping
+    ) -> DevicePoller:
+        """One trial at a time per configured bus (a new bus is one request's anyway)."""
+        slot = chosen.bus.id if chosen.configured else None
+        if slot is not None and slot in self._trials:
             raise AskError(HTTPStatus.TOO_MANY_REQUESTS, f"busy: a trial runs on bus {slot}")
-        self._trials.add(slot)
+        if slot is not None:
+            self._trials.add(slot)
         try:
             async with self.buses.opened(chosen) as scheduler:
-                poller = await trial_poll(device, mapping, scheduler, chosen.bus)
+                return await trial_poll(device, mapping, scheduler, chosen.bus)
         except TimeoutError:
             raise AskError(
                 HTTPStatus.GATEWAY_TIMEOUT, f"the trial poll took over {TRIAL_LIMIT:g} s"
             ) from None
         finally:
-            self._trials.discard(slot)
-        data = trial_document(poller, chosen.bus.id)
-        where = f"unit {ask.unit} on bus {chosen.bus.id}"
-        read, refused = data["read"], len(data["refused"])
-        return data, f"trial of {ask.mapping} at {where}: {read} values read, {refused} refused"
+            if slot is not None:
+                self._trials.discard(slot)
 
 
 def trial_document(poller: DevicePoller, bus_id: str) -> dict[str, Any]:
