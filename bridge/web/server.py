@@ -11,9 +11,13 @@
                                          ``errors`` (at once, oldest first),
                                          ``refused`` (each refusal as it happens)
     POST api/login                       {"token": ...} -> the session cookie
-    POST api/request/device/scan|read|write   the management request of the same name,
-                                         run by bridge/management.py with its limits and
-                                         guards; answered like bridge/response/<cmd>
+    POST api/request/device/scan|identify|read|write   the management request of the same
+                                         name, run by bridge/management.py with its limits
+                                         and guards; answered like bridge/response/<cmd>
+    GET  api/ports                       the host's serial ports, by-id names first
+    GET  api/library[?q=...]             the shipped mappings, searched (bridge/web/library.py)
+    POST api/add/scan|identify, api/trial   "Add a device" on a configured or a new bus
+                                         (bridge/web/adding.py); each logged once: who, what
 
 Every ``api/`` route but ``login`` needs access (bridge/web/access.py); every POST must
 come from the page itself. At most ``MAX_REQUESTS`` commissioning requests run at once.
@@ -38,9 +42,13 @@ from bridge.config import LoadedConfig
 from bridge.core.topics import Topics
 from bridge.management import Management
 from bridge.modbus.engine import Engine
+from bridge.modbus.ports import serial_ports
 from bridge.web.access import Access, Refusal, change_refusal
+from bridge.web.adding import Adding
 from bridge.web.http import EventSink, EventStream, Request, Response
+from bridge.web.library import QueryError, search, shipped_rows
 from bridge.web.live import WebFeed
+from bridge.web.new_bus import AskError
 from bridge.web.views import BusWindow, changed_values, device_document, overview
 
 MAX_REQUESTS = 4  # commissioning requests from the page running at once
@@ -51,8 +59,11 @@ FRESH = 0.25  # seconds an overview (or a fetched device page) is served again a
 COMMISSIONING = frozenset({"device/scan", "device/identify", "device/read", "device/write"})
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
+    "/add.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
 }
+ADDING = {"/api/add/scan": "scan", "/api/add/identify": "identify", "/api/trial": "trial"}
+CATALOGUES = frozenset({"/api/ports", "/api/library"})
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
 if TYPE_CHECKING:
@@ -105,6 +116,7 @@ class WebApp:
         self.static = static
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
+        self.adding = Adding(bridge)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
 
     async def handle(self, request: Request) -> Response | EventStream:
@@ -120,6 +132,10 @@ class WebApp:
             return _error(refusal.status, refusal.message)
         if path.startswith("/api/request/"):
             return await self._request(request, path.removeprefix("/api/request/"))
+        if path in ADDING:
+            return await self._add(request, ADDING[path])
+        if path in CATALOGUES and method == "GET":
+            return await self._catalogue(request)
         if method not in ("GET", "HEAD"):
             return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
         return self._read(request)
@@ -257,6 +273,47 @@ class WebApp:
         finally:
             self.running -= 1
         return Response(200, answer.encode("utf-8"), _JSON)
+
+    # --- adding a device ------------------------------------------------------------------
+
+    async def _catalogue(self, request: Request) -> Response:
+        """The host's serial ports, or the library searched for ``q``."""
+        if request.path == "/api/ports":
+            ports = await asyncio.to_thread(serial_ports)
+            return _json({"ports": [port.as_dict() for port in ports]})
+        rows = await asyncio.to_thread(shipped_rows)  # loaded once, off the event loop
+        try:
+            return _json(search(rows, request.query.get("q", "")))
+        except QueryError as exc:
+            who = self.access.who(request)
+            log.warning("web page: library search refused (%s): 400 %s", who, exc)
+            return _error(HTTPStatus.BAD_REQUEST, str(exc))
+
+    async def _add(self, request: Request, step: str) -> Response:
+        """One step of "Add a device"; answered and logged once (who, what, or why not)."""
+        who = self.access.who(request)
+        try:
+            data, said = await self._add_step(request, step)
+        except AskError as exc:
+            log.warning("web page: %s refused (%s): %d %s", step, who, exc.status, exc)
+            return _error(exc.status, str(exc))
+        log.info("web page: %s (%s)", said, who)
+        return _json({"status": "ok", "data": data})
+
+    async def _add_step(self, request: Request, step: str) -> tuple[dict[str, Any], str]:
+        if request.method != "POST":
+            raise AskError(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        refusal = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            raise AskError(refusal.status, refusal.message)
+        if self.running >= MAX_REQUESTS:
+            raise AskError(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        self.running += 1
+        try:
+            work = {"scan": self.adding.scan, "identify": self.adding.identify}
+            return await work.get(step, self.adding.trial)(request.body)
+        finally:
+            self.running -= 1
 
 
 def _json(document: object) -> Response:
