@@ -18,6 +18,8 @@
     GET  api/library[?q=...]             the shipped mappings, searched (bridge/web/library.py)
     POST api/add/scan|identify, api/trial   "Add a device" on a configured or a new bus
                                          (bridge/web/adding.py); each logged once: who, what
+    GET|POST api/config/devices/<id>...  edit or remove a configured device
+                                         (bridge/web/device_edits.py)
 
 Every ``api/`` route but ``login`` needs access (bridge/web/access.py); every POST must
 come from the page itself. At most ``MAX_REQUESTS`` commissioning requests run at once.
@@ -45,6 +47,8 @@ from bridge.modbus.engine import Engine
 from bridge.modbus.ports import serial_ports
 from bridge.web.access import Access, Refusal, change_refusal
 from bridge.web.adding import Adding
+from bridge.web.config_file import ConfigFile
+from bridge.web.device_edits import DeviceEdits
 from bridge.web.http import EventSink, EventStream, Request, Response
 from bridge.web.library import QueryError, search, shipped_rows
 from bridge.web.live import WebFeed
@@ -105,6 +109,7 @@ class BridgeState(Protocol):
     def mqtt_state(self) -> str: ...
     @property
     def mqtt_subscriptions(self) -> dict[str, str]: ...
+    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
 
 
 class WebApp:
@@ -117,6 +122,8 @@ class WebApp:
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
         self.adding = Adding(bridge)
+        self.config_file = ConfigFile(bridge)  # the one writer of the config file
+        self.edits = DeviceEdits(bridge, access, self.config_file)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
 
     async def handle(self, request: Request) -> Response | EventStream:
@@ -127,6 +134,8 @@ class WebApp:
             return self._static(request)
         if path == "/api/login":
             return self._login(request)
+        if self.edits.serves(request):  # checks access itself: a refused change is logged
+            return await self.edits.handle(request)
         refusal = self.access.refusal(request)
         if refusal is not None:
             return _error(refusal.status, refusal.message)

@@ -1,0 +1,132 @@
+"""The config file as the page changes it: one change at a time, written by the config
+store (bridge/config/store.py), then applied to the running bridge.
+
+``ConfigFile(bridge).change(change)`` runs, holding one lock (two page changes never
+interleave: a change written first and applied last would undo the other in the running
+bridge):
+
+1. the store opened at the first change (``bridge.loaded.path``; a config that is no file,
+   the demo's, gets a read-only store);
+2. ``store.preview(change)``: validated as ``check`` does, nothing written;
+3. the difference to the running config checked as ``bridge.apply_config`` checks it: a
+   change that needs a restart (a ``mapping: sunspec`` device) is refused before anything
+   is written;
+4. ``store.apply(change)``: written atomically with a backup, comments kept;
+5. ``bridge.apply_config(applied.loaded)``: only what changed starts, stops or restarts.
+
+Refusals are ``ConfigChangeError(status, message)``: 400 for a value the config refuses
+(naming its field), 403 for a read-only config, 409 for a file changed on disk since it
+was read (``diff`` from what was read to what is there; the store reads the file again, so
+the next change starts from it) or a change that needs a restart, 500 for a disk that
+refused the write (the file as it was). Blocking store calls run in a thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+from http import HTTPStatus
+from typing import TYPE_CHECKING, Any, Protocol
+
+from bridge.config import LoadedConfig
+from bridge.config.store import AnyChange, ConfigStore
+from bridge.core.config_diff import diff_configs
+from bridge.errors import (
+    ConfigConflictError,
+    ConfigEditError,
+    ConfigError,
+    ConfigReadOnlyError,
+    ConfigWriteError,
+)
+from bridge.reconfigure import refusal, view_of
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+
+class Reconfigurable(Protocol):
+    """The running bridge as a config change sees it."""
+
+    @property
+    def loaded(self) -> LoadedConfig: ...
+    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
+
+
+class ConfigChangeError(Exception):
+    """A change refused: ``status`` and one line saying why; ``diff`` for a conflict."""
+
+    def __init__(self, status: HTTPStatus, message: str, diff: str = "") -> None:
+        super().__init__(message)
+        self.status = status
+        self.diff = diff
+
+
+@dataclass(frozen=True, slots=True)
+class Changed:
+    """A change written and applied: the store's summary (no secrets) and what the
+    running bridge did (``apply_config``'s answer)."""
+
+    summary: str
+    applied: dict[str, Any]
+
+    @property
+    def line(self) -> str:
+        """The summary on one line, for the log."""
+        return "; ".join(part.strip() for part in self.summary.splitlines())
+
+
+class ConfigFile:
+    """The running bridge's config file, changed one change at a time (see the module)."""
+
+    def __init__(self, bridge: Reconfigurable) -> None:
+        self.bridge = bridge
+        self.lock = asyncio.Lock()
+        self._store: ConfigStore | None = None
+
+    async def store(self) -> ConfigStore:
+        """The store, opened at the first call; ConfigChangeError (500) if the file cannot
+        be read now."""
+        if self._store is None:
+            try:
+                self._store = await asyncio.to_thread(_open, self.bridge.loaded)
+            except ConfigError as exc:
+                raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, str(exc)) from None
+        return self._store
+
+    async def change(self, change: AnyChange) -> Changed:
+        """Write ``change`` and apply it (see the module); ConfigChangeError if refused."""
+        async with self.lock:
+            store = await self.store()
+            try:
+                new = await asyncio.to_thread(store.preview, change)
+                self._check_live(new)
+                applied = await asyncio.to_thread(store.apply, change)
+            except ConfigConflictError as exc:
+                await asyncio.to_thread(store.refresh)
+                raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
+            except ConfigReadOnlyError as exc:
+                raise ConfigChangeError(HTTPStatus.FORBIDDEN, exc.message) from None
+            except ConfigWriteError as exc:
+                raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, exc.message) from None
+            except ConfigEditError as exc:
+                where = f"{exc.field}: " if exc.field else ""
+                raise ConfigChangeError(HTTPStatus.BAD_REQUEST, where + exc.message) from None
+            answer = await self.bridge.apply_config(applied.loaded)
+            if answer.get("status") != "ok":  # checked in step 3: a bug if it happens
+                message = f"written, not applied: {answer.get('error')}; restart the bridge"
+                raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, message)
+            return Changed(applied.summary, answer)
+
+    def _check_live(self, new: LoadedConfig) -> None:
+        old = self.bridge.loaded
+        restart = refusal(diff_configs(view_of(old), view_of(new)), old, new)
+        if restart:
+            message = "this change needs a restart of the bridge: " + ", ".join(restart)
+            raise ConfigChangeError(HTTPStatus.CONFLICT, message)
+
+
+def _open(loaded: LoadedConfig) -> ConfigStore:
+    path: Path = loaded.path
+    if not path.is_file():
+        return ConfigStore.read_only(loaded, "a config built in memory (the demo's)")
+    return ConfigStore.open(path)
