@@ -5,8 +5,12 @@ store (bridge/config/store.py), then applied to the running bridge.
 interleave: a change written first and applied last would undo the other in the running
 bridge):
 
-1. the store opened at the first change (``bridge.loaded.path``; a config that is no file,
-   the demo's, gets a read-only store);
+1. the store (``bridge.loaded.path``; a config that is no file, the demo's, gets a
+   read-only store), opened when the page starts serving (``open``) so that a change made
+   to the file by hand after it is shown as a diff; then, until the file on disk loads as
+   the config the bridge runs, every change is refused saying what the file holds that the
+   bridge does not run (apply it first: SIGHUP or a restart; or undo it), so the page only
+   ever applies its own change;
 2. ``store.preview(change)``: validated as ``check`` does, nothing written;
 3. the difference to the running config checked as ``bridge.apply_config`` checks it: a
    change that needs a restart (a ``mapping: sunspec`` device) is refused before anything
@@ -16,19 +20,20 @@ bridge):
 
 Refusals are ``ConfigChangeError(status, message)``: 400 for a value the config refuses
 (naming its field), 403 for a read-only config, 409 for a file changed on disk since it
-was read (``diff`` from what was read to what is there; the store reads the file again, so
-the next change starts from it) or a change that needs a restart, 500 for a disk that
-refused the write (the file as it was). Blocking store calls run in a thread.
+was read (``diff`` from what was read to what is there; the store reads the file again)
+or one the bridge does not run, or a change that needs a restart, 500 for a disk that
+refused the write (the file as it was). Blocking calls run in a thread.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from dataclasses import dataclass
 from http import HTTPStatus
 from typing import TYPE_CHECKING, Any, Protocol
 
-from bridge.config import LoadedConfig
+from bridge.config import LoadedConfig, load_config
 from bridge.config.store import AnyChange, ConfigStore
 from bridge.core.config_diff import diff_configs
 from bridge.errors import (
@@ -82,6 +87,14 @@ class ConfigFile:
         self.bridge = bridge
         self.lock = asyncio.Lock()
         self._store: ConfigStore | None = None
+        self._in_step = False  # the file on disk was seen to load as the running config
+
+    async def open(self) -> None:
+        """Read the file now (the page starts serving): a later change on disk is a
+        conflict, shown as a diff. A file that cannot be read now is tried again later."""
+        with contextlib.suppress(ConfigChangeError):
+            if (await self.store()).writable:
+                await self._check_in_step()
 
     async def store(self) -> ConfigStore:
         """The store, opened at the first call; ConfigChangeError (500) if the file cannot
@@ -97,12 +110,15 @@ class ConfigFile:
         """Write ``change`` and apply it (see the module); ConfigChangeError if refused."""
         async with self.lock:
             store = await self.store()
+            if not self._in_step and store.writable:
+                await self._check_in_step()
             try:
                 new = await asyncio.to_thread(store.preview, change)
                 self._check_live(new)
                 applied = await asyncio.to_thread(store.apply, change)
             except ConfigConflictError as exc:
                 await asyncio.to_thread(store.refresh)
+                self._in_step = False
                 raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
             except ConfigReadOnlyError as exc:
                 raise ConfigChangeError(HTTPStatus.FORBIDDEN, exc.message) from None
@@ -116,6 +132,23 @@ class ConfigFile:
                 message = f"written, not applied: {answer.get('error')}; restart the bridge"
                 raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, message)
             return Changed(applied.summary, answer)
+
+    async def _check_in_step(self) -> None:
+        """ConfigChangeError (409) unless the file on disk loads as the running config."""
+        running = self.bridge.loaded
+        try:
+            on_disk = await asyncio.to_thread(load_config, running.path)
+        except ConfigError as exc:
+            message = f"the config file does not load now, nothing written: {exc}"
+            raise ConfigChangeError(HTTPStatus.CONFLICT, message) from None
+        if on_disk.config != running.config:
+            held = diff_configs(view_of(running), view_of(on_disk)).describe()
+            message = (
+                f"the config file holds changes the bridge does not run ({held}): apply them "
+                "first (SIGHUP or a restart) or undo them; nothing written"
+            )
+            raise ConfigChangeError(HTTPStatus.CONFLICT, message)
+        self._in_step = True
 
     def _check_live(self, new: LoadedConfig) -> None:
         old = self.bridge.loaded

@@ -78,7 +78,7 @@ class DeviceEdits:
         return path.startswith(PREFIX + "/") or (path == PREFIX and request.method != "POST")
 
     async def handle(self, request: Request) -> Response:
-        changing = request.method == "POST"
+        changing = request.method not in ("GET", "HEAD")  # refused if not a POST
         who = self.access.who(request)
         what = _what(request)
         try:
@@ -89,6 +89,8 @@ class DeviceEdits:
                 raise ConfigChangeError(refusal.status, refusal.message)
             if not changing:
                 return await self._read(request)
+            if request.method != "POST":
+                raise ConfigChangeError(HTTPStatus.METHOD_NOT_ALLOWED, "GET or POST only")
             changed, device = await self._change(request)
         except ConfirmationError as exc:
             names = ", ".join(e["name"] for e in exc.document["entities"]) or "no entity"
@@ -110,8 +112,6 @@ class DeviceEdits:
     # --- reading ----------------------------------------------------------------------
 
     async def _read(self, request: Request) -> Response:
-        if request.method not in ("GET", "HEAD"):
-            raise ConfigChangeError(HTTPStatus.METHOD_NOT_ALLOWED, "GET or POST only")
         if request.path == PREFIX:
             store = await self.file.store()
             rows = [self._row(d) for d in self.bridge.loaded.config.devices]

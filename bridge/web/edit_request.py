@@ -22,6 +22,7 @@ shows. ``Confirmations`` hands out one-time tokens bound to one device and one c
 from __future__ import annotations
 
 import json
+import re
 import secrets
 import time
 from collections import OrderedDict
@@ -39,8 +40,10 @@ from bridge.web.config_file import ConfigChangeError
 CONFIRM_FOR = 120.0  # seconds a confirmation token may be used
 MAX_PENDING = 16  # confirmations waiting at once; the oldest is dropped beyond
 MAX_DURATION_TEXT = 32  # characters of an interval given as text ("2min")
-Duration = (
-    Annotated[float, Field(gt=0, le=31 * 86400, allow_inf_nan=False)]
+_TYPE_TAG = re.compile(r"^(int|float|str|bool|constrained-\w+)$")  # a union member's place
+Duration = (  # an int stays one: written as given (``fast: 1``, not ``1.0``)
+    Annotated[int, Field(gt=0, le=31 * 86400)]
+    | Annotated[float, Field(gt=0, le=31 * 86400, allow_inf_nan=False)]
     | Annotated[str, StringConstraints(min_length=1, max_length=MAX_DURATION_TEXT)]
 )
 
@@ -103,9 +106,11 @@ def _ask(body: bytes) -> EditAsk:
         return EditAsk.model_validate(document, strict=True)
     except ValidationError as exc:
         first = exc.errors(include_url=False)[0]
-        where = ".".join(str(p) for p in first["loc"] if not str(p).startswith(("float", "str")))
+        where = ".".join(str(p) for p in first["loc"] if not _TYPE_TAG.match(str(p)))
         extra = first["type"] == "extra_forbidden"
         said = "not a field the page changes" if extra else first["msg"]
+        if where.startswith("poll.") and not extra:  # the union's first member said
+            said = "seconds (a number above 0) or a duration such as 10s"
         raise ConfigChangeError(HTTPStatus.BAD_REQUEST, f"{where[:80]}: {said}") from None
 
 
