@@ -47,7 +47,7 @@ buses:
     host: 127.0.0.1
     tcp_port: {modbus}
     timeout: 0.5
-
+{serial_bus}
 devices:
   # the borehole's pump
   - id: pump
@@ -71,6 +71,18 @@ devices:
     poll:
       fast: 0.5   # every half second
       slow: 5
+{serial_device}"""
+SERIAL_BUS = """\
+  - id: rs485   # a line with no adapter plugged in yet
+    transport: rtu
+    port: /dev/ttyNOPE0
+"""
+SERIAL_DEVICE = """\
+  - id: meter
+    bus: rs485
+    unit: 7
+    mapping: nastec_vasco
+    enabled: false
 """
 
 
@@ -102,13 +114,19 @@ class EditSite(reconfigure_site.Site):
 
 
 @contextlib.asynccontextmanager
-async def edit_site(broker: Broker, folder: Path) -> AsyncIterator[EditSite]:
-    """The bridge on ``CONFIG`` (file ``folder/config.yaml``), every device published."""
+async def edit_site(
+    broker: Broker, folder: Path, *, serial: bool = False
+) -> AsyncIterator[EditSite]:
+    """The bridge on ``CONFIG`` (file ``folder/config.yaml``), every device published;
+    with ``serial``, a serial bus and a disabled device on it too."""
     sim = unit_simulator()
     async with contextlib.AsyncExitStack() as stack:
         modbus = await stack.enter_async_context(serving_tcp(sim))
         port = free_port()
-        text = CONFIG.format(mqtt=broker.url, web=port, token=TOKEN, ingress=INGRESS, modbus=modbus)
+        text = CONFIG.format(
+            mqtt=broker.url, web=port, token=TOKEN, ingress=INGRESS, modbus=modbus,
+            serial_bus=SERIAL_BUS if serial else "", serial_device=SERIAL_DEVICE if serial else "",
+        )  # fmt: skip
         path = folder / "config.yaml"
         path.write_text(text, encoding="utf-8")
         observer = await stack.enter_async_context(
