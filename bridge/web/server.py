@@ -64,6 +64,7 @@ COMMISSIONING = frozenset({"device/scan", "device/identify", "device/read", "dev
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
     "/add.js": "text/javascript; charset=utf-8",
+    "/edit.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
 }
 ADDING = {"/api/add/scan": "scan", "/api/add/identify": "identify", "/api/trial": "trial"}
