@@ -15,8 +15,14 @@ import pytest
 from bridge.web import edit_request
 from bridge.web.http import BODY_LIMIT
 from tests.integration.mosquitto import Broker
-from tests.integration.web import Answer, http, parse_answer, request_bytes
-from tests.integration.web_edit_site import AUTH, EditSite, edit_site, folder_files, web_lines
+from tests.integration.web import Answer, demo_site, http, parse_answer, request_bytes
+from tests.integration.web_edit_site import (
+    AUTH,
+    EditSite,
+    edit_site,
+    folder_files,
+    web_lines,
+)
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(120)]
 PUMP = "/api/config/devices/pump"
@@ -30,6 +36,7 @@ HOSTILE = [
     pytest.param("POST", PUMP, {"unit": 0}, {}, 400, "unit", id="unit-0"),
     pytest.param("POST", PUMP, {"unit": 256}, {}, 400, "unit", id="unit-256"),
     pytest.param("POST", "/api/config/devices/meter", {"unit": 248}, {}, 400, "serial lines address units 1..247", id="serial-unit-248"),
+    pytest.param("POST", "/api/config/devices/inverter", {"enabled": True}, {}, 409, "needs a restart of the bridge: devices.inverter (mapping: sunspec)", id="sunspec-needs-a-restart"),
     pytest.param("POST", PUMP, {"unit": "4"}, {}, 400, "unit", id="unit-as-text"),
     pytest.param("POST", PUMP, {"unit": True}, {}, 400, "unit", id="unit-as-bool"),
     pytest.param("POST", PUMP, {"unit": 4.0}, {}, 400, "unit", id="unit-as-float"),
@@ -159,3 +166,19 @@ async def test_a_confirmation_is_used_once(mosquitto: Broker, tmp_path: Path) ->
         again = await here.edit("drive", DANGER | {"confirmation": token})
         assert again.status == 409 and "expired" in again.json()["error"]
         assert not here.bridge.engine.devices["drive"].device.allow_dangerous_writes
+
+
+async def test_the_demo_s_config_is_no_file_the_page_writes(
+    mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="bridge.web")
+    async with demo_site(mosquitto, tmp_path) as s:
+        listed = (await http(s.port, "GET", "/api/config/devices")).json()
+        assert listed["writable"] is False and len(listed["devices"]) == 5
+        device = listed["devices"][0]["id"]
+        before = len(web_lines(caplog))
+        answer = await http(s.port, "POST", f"/api/config/devices/{device}", {"name": "x"})
+        assert answer.status == 403, answer.body
+        assert "a config built in memory (the demo's)" in answer.json()["error"]
+        assert len(web_lines(caplog)[before:]) == 1
+        assert s.bridge.loaded.config.devices[0].name != "x"
