@@ -88,6 +88,7 @@ class ConfigStore:
         self._read = read
         self._loaded = loaded
         self._reason = reason
+        self._indent: tuple[int, int, int] | None = None  # found for the text of _read
         self._lock = threading.Lock()
 
     @classmethod
@@ -125,7 +126,7 @@ class ConfigStore:
         cannot be read."""
         with self._lock:
             if self._loaded is None:
-                self._read = _read_file(self.path)
+                self._read, self._indent = _read_file(self.path), None
 
     def preview(self, change: AnyChange) -> LoadedConfig:
         """The config ``change`` gives, validated as ``check`` does; nothing written."""
@@ -155,7 +156,8 @@ class ConfigStore:
         expected = _unshared(read.data)  # an anchor's uses are copies: only one changes
         make_change(expected, change, lambda value, _: _unshared(value))
         try:
-            document = Document.parse(read.text, source)
+            document = Document.parse(read.text, source, self._indent)
+            self._indent = document.indent
             make_change(document.root, change, document.node)
             text = document.render(expected, source)
         except ValueError as exc:  # RenderError, or YAML ruamel reads otherwise than PyYAML
