@@ -128,6 +128,12 @@ def test_removing_a_device_removes_its_block_and_comments_only(config: Path) -> 
     assert after == before[:start] + before[end:]
 
 
+def test_removing_the_last_device_removes_its_separator_too(config: Path) -> None:
+    before = config.read_text(encoding="utf-8")
+    after = apply(config, {"kind": "remove_device", "id": "booster_starter"})
+    assert after == before[: before.index("\n  - id: booster_starter") + 1].rstrip("\n") + "\n"
+
+
 def test_adding_a_device_appends_it_and_changes_nothing_else(config: Path) -> None:
     before = config.read_text(encoding="utf-8")
     device = {
@@ -140,8 +146,8 @@ def test_adding_a_device_appends_it_and_changes_nothing_else(config: Path) -> No
     }
     applied = ConfigStore.open(config).apply(parse_change({"kind": "add_device", "device": device}))
     after = config.read_text(encoding="utf-8")
-    assert after == before + (
-        '  - id: meter\n    name: "on"\n    bus: rs485\n    unit: 3\n'
+    assert after == before + (  # spaced as the entries before it
+        '\n  - id: meter\n    name: "on"\n    bus: rs485\n    unit: 3\n'
         "    mapping: soft_starter\n    poll:\n      fast: 10s\n"
     )
     assert applied.loaded.config.devices[-1].name == "on"
