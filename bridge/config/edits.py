@@ -121,6 +121,9 @@ class AddDevice(_Change):
     @field_validator("device")
     @classmethod
     def _check(cls, value: dict[str, Any]) -> dict[str, Any]:
+        for key in SECRET_KEYS & set(value):
+            if value[key] == SECRET_MARK:
+                raise ValueError(f"device.{key}: give the secret itself (the mark keeps one)")
         return _fields(value, _DEVICE_FIELDS, "device")
 
 
@@ -136,7 +139,11 @@ class EditDevice(_Change):
     @classmethod
     def _check(cls, value: dict[str, Any]) -> dict[str, Any]:
         for path in value:
-            if not _PATH.match(path) or path.split(".")[0] not in _DEVICE_FIELDS:
+            if (
+                not _PATH.match(path)
+                or _CONTROL.search(path)
+                or path.split(".")[0] not in _DEVICE_FIELDS
+            ):
                 raise ValueError(
                     f"device.{path[:MAX_ID]}: not a device field (have {sorted(_DEVICE_FIELDS)})"
                 )
