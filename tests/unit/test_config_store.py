@@ -88,6 +88,25 @@ EDITS = [
     pytest.param(
         {"id": "well_pump"}, ["  - id: borehole_pump"], ["  - id: well_pump"], id="new-id"
     ),
+    pytest.param(
+        {"allow_dangerous_writes": None},
+        [
+            "    allow_dangerous_writes: false    # motor ratings, COMBO, passwords stay read-only in HA"
+        ],
+        [],
+        id="a-key-removed-leaves-the-blank-line-after-it",
+    ),
+    pytest.param(
+        {"options": None},
+        [
+            "    options:",
+            "      register_9f: pcb_temperature   # or input_current: which one your model has (keypad)",
+            "      family: vasco                  # mida for a MIDA (digital-input configuration bits)",
+            "      pv_input: absent               # present on a VASCO Solar (MPPT/PV registers)",
+        ],
+        [],
+        id="a-section-removed-leaves-the-comments-after-it",
+    ),
 ]
 
 
@@ -103,6 +122,8 @@ def test_an_edit_changes_its_lines_only(
     loaded = load_config(config)  # as the bridge loads it
     device = loaded.config.devices[0]
     for path, value in fields.items():
+        if value is None:  # removed: the default applies
+            continue
         field, _, key = path.partition(".")
         got = getattr(device, field)
         assert (got[key] if isinstance(got, dict) else getattr(got, key, got)) in (value, 7.0)
