@@ -238,7 +238,8 @@ def _device_index(devices: Any, device_id: str) -> tuple[list[Any], int]:
         if isinstance(device, dict) and device.get("id") == device_id:
             return listed, index
     have = sorted(str(d.get("id")) for d in listed if isinstance(d, dict))
-    _raise(f"no device {device_id!r} in the file (have {have})", f"devices.{device_id}")
+    shown = ", ".join(have[:20]) + (f" and {len(have) - 20} more" if len(have) > 20 else "")
+    _raise(f"no device {device_id!r} in the file (have {shown or 'none'})", f"devices.{device_id}")
 
 
 def _set(node: MutableMapping[Any, Any], path: list[str], value: Any, make: Make) -> None:
