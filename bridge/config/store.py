@@ -23,9 +23,10 @@ lines kept: bridge/config/document.py), the text read back with ``load_config_da
 ``check`` reads it, then written: a temp file in the same folder, fsync, the previous
 version kept as ``<name>.1`` (``.1`` newest, ``BACKUPS`` kept), ``os.replace``; the file's
 mode (and owner, as root) kept. A file given as a symbolic link is written where it
-leads. Methods are blocking and thread-safe (one lock): async callers run them with
-``asyncio.to_thread``. The summary names the change and each value it changed, secrets
-hidden: fit for the log.
+leads. The file is compared with what was read just before the temp file is written: a
+change landing between that and the rename (a few milliseconds) is not seen. Methods are
+blocking and thread-safe (one lock): async callers run them with ``asyncio.to_thread``.
+The summary names the change and each value it changed, secrets hidden: fit for the log.
 """
 
 from __future__ import annotations
