@@ -80,30 +80,35 @@ def _dump(handler: YAML, root: Any) -> str:
 class Document:
     """A config file's YAML, editable in place; ``text`` is the user's (``\\n`` lines)."""
 
-    def __init__(self, text: str, root: Any, handler: YAML, base: str) -> None:
+    def __init__(
+        self, text: str, root: Any, indent: tuple[int, int, int], handler: YAML, base: str
+    ) -> None:
         self.text = text
         self.root = root
+        self.indent = indent  # (mapping, sequence, dash offset) ruamel writes
         self._handler = handler
         self._base = base  # ruamel's dump of the unedited document
 
     @classmethod
-    def parse(cls, text: str, source: str) -> Document:
+    def parse(cls, text: str, source: str, indent: tuple[int, int, int] | None = None) -> Document:
         """The document of ``text``; ValueError naming ``source`` if it is no YAML mapping.
-        The indentation ruamel writes is the one that reproduces most of the user's lines."""
+        The indentation ruamel writes is ``indent``, else the one that reproduces most of
+        the user's lines (the one a previous parse of the same text found)."""
         try:
             parse_yaml(text, source)  # the loader's reading (duplicate keys refused)
             best: tuple[int, Document] | None = None
             lines = text.splitlines()
             guess = _guessed_indent(lines)
-            for indent in sorted(_INDENTS, key=lambda candidate: candidate != guess):
-                handler = _yaml(indent)
+            candidates = [indent] if indent else sorted(_INDENTS, key=lambda c: c != guess)
+            for candidate in candidates:
+                handler = _yaml(candidate)
                 root = handler.load(text)
                 if not isinstance(root, CommentedMap):
                     raise ValueError(f"{source}: the file must hold a mapping")
                 base = _dump(handler, root)
                 changed = changed_lines(lines, base.splitlines())
                 if best is None or changed < best[0]:
-                    best = (changed, cls(text, root, handler, base))
+                    best = (changed, cls(text, root, candidate, handler, base))
                 if changed == 0:
                     break
         except YAMLError as exc:

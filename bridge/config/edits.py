@@ -121,6 +121,9 @@ class AddDevice(_Change):
     @field_validator("device")
     @classmethod
     def _check(cls, value: dict[str, Any]) -> dict[str, Any]:
+        for key in SECRET_KEYS & set(value):
+            if value[key] == SECRET_MARK:
+                raise ValueError(f"device.{key}: give the secret itself (the mark keeps one)")
         return _fields(value, _DEVICE_FIELDS, "device")
 
 
@@ -136,7 +139,11 @@ class EditDevice(_Change):
     @classmethod
     def _check(cls, value: dict[str, Any]) -> dict[str, Any]:
         for path in value:
-            if not _PATH.match(path) or path.split(".")[0] not in _DEVICE_FIELDS:
+            if (
+                not _PATH.match(path)
+                or _CONTROL.search(path)
+                or path.split(".")[0] not in _DEVICE_FIELDS
+            ):
                 raise ValueError(
                     f"device.{path[:MAX_ID]}: not a device field (have {sorted(_DEVICE_FIELDS)})"
                 )
@@ -231,7 +238,8 @@ def _device_index(devices: Any, device_id: str) -> tuple[list[Any], int]:
         if isinstance(device, dict) and device.get("id") == device_id:
             return listed, index
     have = sorted(str(d.get("id")) for d in listed if isinstance(d, dict))
-    _raise(f"no device {device_id!r} in the file (have {have})", f"devices.{device_id}")
+    shown = ", ".join(have[:20]) + (f" and {len(have) - 20} more" if len(have) > 20 else "")
+    _raise(f"no device {device_id!r} in the file (have {shown or 'none'})", f"devices.{device_id}")
 
 
 def _set(node: MutableMapping[Any, Any], path: list[str], value: Any, make: Make) -> None:

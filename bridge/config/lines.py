@@ -106,19 +106,60 @@ def changed_lines(a: Sequence[str], b: Sequence[str]) -> int:
 
 
 def above_blank_lines(base: list[str], edited: list[str]) -> list[str]:
-    """``edited`` with each block of added lines moved up above the blank and comment lines
-    before it: ruamel writes a new key or entry after the blank line and the comments that
-    close the one before, which belong to what follows."""
+    """``edited`` with its added and removed lines placed as a person would: added lines
+    above the blank and comment lines before them (ruamel writes a new key or entry after
+    the blank line and the comments that close the one before, which belong to what
+    follows), a blank line before a new list entry if the entry before it has one; removed
+    lines leave the comments and blank lines that close them (ruamel removes them with the
+    key before), and a removed last entry the blank line before it."""
     result: list[str] = []
-    for tag, _, _, j1, j2 in opcodes(base, edited):
+    for tag, i1, i2, j1, j2 in opcodes(base, edited):
+        ends = i2 == len(base) or not base[i2].strip()
+        if tag == "delete" and _entry(base[i1]) and ends and result and not result[-1].strip():
+            result.pop()  # the removed entry's separator
+        if tag == "delete":
+            result += _closing(base[i1:i2])
         if tag != "insert":
             result += edited[j1:j2]
             continue
         keep = len(result)
-        while keep > 0 and (not result[keep - 1].strip() or result[keep - 1].lstrip()[0] == "#"):
+        while keep > 0 and _remark(result[keep - 1]):
             keep -= 1
-        result[keep:keep] = edited[j1:j2]
+        added = edited[j1:j2]
+        if _entry(added[0]) and _spaced_entry(result[:keep], added[0]):
+            added = ["\n", *added]
+        result[keep:keep] = added
     return result
+
+
+def _closing(removed: list[str]) -> list[str]:
+    """The comment and blank lines that end ``removed`` (an entry's blank lines excepted):
+    they lead to what follows it."""
+    count = 0
+    while count < len(removed) and _remark(removed[len(removed) - 1 - count]):
+        count += 1
+    closing = removed[len(removed) - count :] if count < len(removed) else []
+    return [line for line in closing if line.strip()] if _entry(removed[0]) else closing
+
+
+def _remark(line: str) -> bool:
+    return not line.strip() or line.lstrip().startswith("#")
+
+
+def _entry(line: str) -> bool:
+    return line.lstrip().startswith("- ")
+
+
+def _spaced_entry(before: list[str], entry: str) -> bool:
+    """The list entry before ``entry`` (same indentation) has a blank line before it."""
+    indent = len(entry) - len(entry.lstrip())
+    for index in range(len(before) - 1, 0, -1):
+        line = before[index]
+        if line.strip() and len(line) - len(line.lstrip()) < indent:
+            return False  # out of the list
+        if _entry(line) and len(line) - len(line.lstrip()) == indent:
+            return not before[index - 1].strip()
+    return False
 
 
 def merge_lines(user: list[str], base: list[str], edited: list[str]) -> list[str]:

@@ -24,7 +24,8 @@ MAX_ROWS = 40  # rows of a change summary; more are counted
 
 
 def public_data(data: Any) -> Any:
-    """``data`` (plain config data) with every secret replaced by SECRET_MARK."""
+    """``data`` (plain config data) with every secret replaced by SECRET_MARK, and values
+    JSON has no type for (a YAML date) as text."""
     if isinstance(data, dict):
         return {
             key: SECRET_MARK if key in SECRET_KEYS and value is not None else public_data(value)
@@ -34,7 +35,7 @@ def public_data(data: Any) -> Any:
         return [public_data(item) for item in data]
     if isinstance(data, str):
         return _URL_PASSWORD.sub(rf"\g<1>{SECRET_MARK}@", data)
-    return data
+    return data if data is None or isinstance(data, bool | int | float) else str(data)
 
 
 def redact_text(text: str) -> str:

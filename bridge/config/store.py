@@ -23,9 +23,10 @@ lines kept: bridge/config/document.py), the text read back with ``load_config_da
 ``check`` reads it, then written: a temp file in the same folder, fsync, the previous
 version kept as ``<name>.1`` (``.1`` newest, ``BACKUPS`` kept), ``os.replace``; the file's
 mode (and owner, as root) kept. A file given as a symbolic link is written where it
-leads. Methods are blocking and thread-safe (one lock): async callers run them with
-``asyncio.to_thread``. The summary names the change and each value it changed, secrets
-hidden: fit for the log.
+leads. The file is compared with what was read just before the temp file is written: a
+change landing between that and the rename (a few milliseconds) is not seen. Methods are
+blocking and thread-safe (one lock): async callers run them with ``asyncio.to_thread``.
+The summary names the change and each value it changed, secrets hidden: fit for the log.
 """
 
 from __future__ import annotations
@@ -88,6 +89,7 @@ class ConfigStore:
         self._read = read
         self._loaded = loaded
         self._reason = reason
+        self._indent: tuple[int, int, int] | None = None  # found for the text of _read
         self._lock = threading.Lock()
 
     @classmethod
@@ -125,7 +127,7 @@ class ConfigStore:
         cannot be read."""
         with self._lock:
             if self._loaded is None:
-                self._read = _read_file(self.path)
+                self._read, self._indent = _read_file(self.path), None
 
     def preview(self, change: AnyChange) -> LoadedConfig:
         """The config ``change`` gives, validated as ``check`` does; nothing written."""
@@ -155,7 +157,8 @@ class ConfigStore:
         expected = _unshared(read.data)  # an anchor's uses are copies: only one changes
         make_change(expected, change, lambda value, _: _unshared(value))
         try:
-            document = Document.parse(read.text, source)
+            document = Document.parse(read.text, source, self._indent)
+            self._indent = document.indent
             make_change(document.root, change, document.node)
             text = document.render(expected, source)
         except ValueError as exc:  # RenderError, or YAML ruamel reads otherwise than PyYAML

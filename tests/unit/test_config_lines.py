@@ -77,3 +77,11 @@ def test_added_lines_go_above_the_blank_line_that_closes_an_entry() -> None:
         "# b\n",
         "- id: b\n",
     ]
+
+
+def test_a_new_entry_is_spaced_as_the_one_before_and_a_removed_last_takes_its_space() -> None:
+    base = ["items:\n", "  - a: 1\n", "\n", "  - b: 2\n"]
+    assert above_blank_lines(base, [*base, "  - c: 3\n"]) == [*base, "\n", "  - c: 3\n"]
+    assert above_blank_lines(base, base[:3]) == base[:2]
+    tight = ["items:\n", "  - a: 1\n", "  - b: 2\n"]
+    assert above_blank_lines(tight, [*tight, "  - c: 3\n"]) == [*tight, "  - c: 3\n"]

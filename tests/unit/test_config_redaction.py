@@ -3,6 +3,8 @@ shows which lines changed, never a value), in data (views) and in change summari
 
 from __future__ import annotations
 
+import datetime
+
 import pytest
 
 from bridge.config.edits import SECRET_KEYS, SECRET_MARK
@@ -79,3 +81,8 @@ def test_views_and_summaries_hide_secrets() -> None:
         f'mqtt.url.1: "mqtt://a:{M}@h2" -> (removed)',
         f'devices.d.password: "{M}" (changed)',
     ]
+
+
+def test_a_view_holds_json_types_only() -> None:  # YAML reads 2024-01-02 as a date
+    view = public_data({"devices": [{"id": "d", "name": datetime.date(2024, 1, 2), "unit": 1}]})
+    assert view == {"devices": [{"id": "d", "name": "2024-01-02", "unit": 1}]}

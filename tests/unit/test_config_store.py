@@ -88,6 +88,25 @@ EDITS = [
     pytest.param(
         {"id": "well_pump"}, ["  - id: borehole_pump"], ["  - id: well_pump"], id="new-id"
     ),
+    pytest.param(
+        {"allow_dangerous_writes": None},
+        [
+            "    allow_dangerous_writes: false    # motor ratings, COMBO, passwords stay read-only in HA"
+        ],
+        [],
+        id="a-key-removed-leaves-the-blank-line-after-it",
+    ),
+    pytest.param(
+        {"options": None},
+        [
+            "    options:",
+            "      register_9f: pcb_temperature   # or input_current: which one your model has (keypad)",
+            "      family: vasco                  # mida for a MIDA (digital-input configuration bits)",
+            "      pv_input: absent               # present on a VASCO Solar (MPPT/PV registers)",
+        ],
+        [],
+        id="a-section-removed-leaves-the-comments-after-it",
+    ),
 ]
 
 
@@ -103,6 +122,8 @@ def test_an_edit_changes_its_lines_only(
     loaded = load_config(config)  # as the bridge loads it
     device = loaded.config.devices[0]
     for path, value in fields.items():
+        if value is None:  # removed: the default applies
+            continue
         field, _, key = path.partition(".")
         got = getattr(device, field)
         assert (got[key] if isinstance(got, dict) else getattr(got, key, got)) in (value, 7.0)
@@ -128,6 +149,12 @@ def test_removing_a_device_removes_its_block_and_comments_only(config: Path) -> 
     assert after == before[:start] + before[end:]
 
 
+def test_removing_the_last_device_removes_its_separator_too(config: Path) -> None:
+    before = config.read_text(encoding="utf-8")
+    after = apply(config, {"kind": "remove_device", "id": "booster_starter"})
+    assert after == before[: before.index("\n  - id: booster_starter") + 1].rstrip("\n") + "\n"
+
+
 def test_adding_a_device_appends_it_and_changes_nothing_else(config: Path) -> None:
     before = config.read_text(encoding="utf-8")
     device = {
@@ -140,8 +167,8 @@ def test_adding_a_device_appends_it_and_changes_nothing_else(config: Path) -> No
     }
     applied = ConfigStore.open(config).apply(parse_change({"kind": "add_device", "device": device}))
     after = config.read_text(encoding="utf-8")
-    assert after == before + (
-        '  - id: meter\n    name: "on"\n    bus: rs485\n    unit: 3\n'
+    assert after == before + (  # spaced as the entries before it
+        '\n  - id: meter\n    name: "on"\n    bus: rs485\n    unit: 3\n'
         "    mapping: soft_starter\n    poll:\n      fast: 10s\n"
     )
     assert applied.loaded.config.devices[-1].name == "on"

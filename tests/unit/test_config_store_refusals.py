@@ -171,6 +171,25 @@ REFUSED = [
     ),
     ({"kind": "edit_device", "id": "borehole_pump", "set": {}}, "set", "at least 1"),
     (
+        {"kind": "edit_device", "id": "borehole_pump", "set": {"options.a\x00": "x"}},
+        "device.options.a\x00",
+        "not a device field",
+    ),
+    (
+        {
+            "kind": "add_device",
+            "device": {
+                "id": "m",
+                "bus": "rs485",
+                "unit": 9,
+                "mapping": "p2_vfd",
+                "password": "**********",
+            },
+        },
+        "device.password",
+        "give the secret itself",
+    ),
+    (
         {"kind": "edit_device", "id": "borehole_pump", "set": {"name": "a\x00b"}},
         "device.name",
         "no control",
