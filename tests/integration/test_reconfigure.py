@@ -1,0 +1,262 @@
+"""A new config applied to a running bridge (bridge/reconfigure.py), end to end: a real
+Mosquitto, the simulator on loopback. Each change starts, stops or restarts only what it
+names; the other devices keep their poller, their counters and their values and miss no
+poll (``Untouched``: their polls counted in the simulator's read log across the change).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from pathlib import Path
+
+import pytest
+
+from bridge.core.entity import PollClass
+from tests.integration.harness import eventually, serving_tcp
+from tests.integration.mosquitto import Broker
+from tests.integration.reconfigure_site import (
+    FAST,
+    Untouched,
+    device,
+    published,
+    site,
+    tcp_bus,
+    unit_simulator,
+)
+
+pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(120)]
+TWO = [device("pump", 1), device("starter", 3)]
+
+
+def listed(here_retained: dict[str, bytes]) -> list[str]:
+    return [d["id"] for d in json.loads(here_retained["modbus/bridge/devices"])]
+
+
+async def test_a_device_added_is_discovered_and_polled_the_others_poll_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "pump", "starter")
+        new = here.changed()
+        new["devices"].append(device("drive", 2, name="Main drive"))
+
+        answer = await here.apply(new)
+
+        assert answer == {
+            "status": "ok",
+            "changes": {"added": ["drive"]},
+            "description": "devices added: drive",
+        }
+        await eventually(lambda: published(here, ["drive"]), timeout=10)
+        config = here.observer.json("homeassistant/device/drive/config")
+        assert config["device"]["name"] == "Main drive"
+        assert here.observer.json("modbus/drive")  # its values
+        await eventually(lambda: "drive" in listed(here.observer.retained))
+        assert here.bridge.loaded.config.devices[-1].id == "drive"
+        await untouched.check()
+
+
+async def test_a_device_removed_leaves_nothing_retained_the_others_poll_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path, TWO, output="both") as here:
+        retained = here.observer.retained
+        await eventually(lambda: retained.get("modbus/starter/availability") == b"online")
+        assert any(t.startswith("modbus/starter/") and t.count("/") == 2 for t in retained)
+        untouched = Untouched.of(here, "pump")
+        new = here.changed()
+        new["devices"] = [d for d in new["devices"] if d["id"] != "starter"]
+
+        answer = await here.apply(new)
+
+        assert answer["changes"] == {"removed": ["starter"]}
+        await eventually(lambda: retained.get("homeassistant/device/starter/config") == b"")
+        await eventually(lambda: retained.get("modbus/starter") == b"")
+        assert "starter" not in here.bridge.engine.devices
+        await eventually(lambda: listed(retained) == ["pump"])
+        await untouched.check()
+        left = await here.retained_now(
+            "modbus/starter", "modbus/starter/#", "homeassistant/device/starter/config"
+        )
+        assert left == {}
+        assert await here.retained_now("homeassistant/device/pump/config")  # still there
+
+
+async def test_disabled_then_enabled_the_other_polls_on(mosquitto: Broker, tmp_path: Path) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        retained = here.observer.retained
+        untouched = Untouched.of(here, "pump")
+        off = here.changed()
+        off["devices"][1]["enabled"] = False
+
+        assert (await here.apply(off))["changes"] == {"disabled": ["starter"]}
+        await eventually(lambda: retained.get("homeassistant/device/starter/config") == b"")
+        await eventually(lambda: retained.get("modbus/starter") == b"")
+        assert "starter" not in here.bridge.engine.devices
+        kept = [d for d in here.bridge.loaded.config.devices if d.id == "starter"]
+        assert [d.enabled for d in kept] == [False]  # in the config still
+        await untouched.check()
+
+        on = here.changed()
+        on["devices"][1]["enabled"] = True
+        assert (await here.apply(on))["changes"] == {"enabled": ["starter"]}
+        await eventually(lambda: published(here, ["starter"]), timeout=10)
+        await untouched.check()
+
+
+async def test_renamed_its_discovery_follows_the_other_polls_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "pump")
+        new = here.changed()
+        new["devices"][1]["name"] = "Well starter"
+
+        assert (await here.apply(new))["changes"] == {"restarted": ["starter"]}
+
+        def named() -> str:
+            return here.observer.json("homeassistant/device/starter/config")["device"]["name"]
+
+        await eventually(lambda: named() == "Well starter", timeout=10)
+        await untouched.check()
+
+
+async def test_moved_to_another_unit_it_polls_there_the_other_polls_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "starter")
+        new = here.changed()
+        new["devices"][0]["unit"] = 4
+        before = len(here.sim.reads(4))
+
+        assert (await here.apply(new))["changes"] == {"restarted": ["pump"]}
+
+        assert here.bridge.engine.devices["pump"].device.unit == 4
+        await eventually(lambda: len(here.sim.reads(4)) > before + 3)
+        await untouched.check()
+
+
+async def test_a_poll_interval_changed_the_other_polls_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "pump")
+        new = here.changed()
+        new["devices"][1]["poll"] = {"fast": 2 * FAST, "slow": 5}
+
+        assert (await here.apply(new))["changes"] == {"restarted": ["starter"]}
+
+        assert here.bridge.engine.devices["starter"].intervals[PollClass.FAST] == 2 * FAST
+        await untouched.check()
+
+
+async def test_a_bus_added_changed_and_removed_the_first_bus_polls_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with contextlib.AsyncExitStack() as stack:
+        here = await stack.enter_async_context(site(mosquitto, tmp_path, TWO))
+        port = await stack.enter_async_context(serving_tcp(unit_simulator()))
+        untouched = Untouched.of(here, "pump", "starter")
+        added = here.changed()
+        added["buses"].append(tcp_bus("lan", port))
+        added["devices"].append(device("drive", 2, bus="lan"))
+
+        answer = await here.apply(added)
+
+        assert answer["changes"] == {"buses_added": ["lan"], "added": ["drive"]}
+        await eventually(lambda: published(here, ["drive"]), timeout=10)
+        assert here.bridge.engine.devices["drive"].scheduler.bus_id == "lan"
+        await untouched.check()
+
+        drive = here.bridge.engine.devices["drive"]
+        changed = here.changed()
+        changed["buses"][1]["timeout"] = 0.8
+        answer = await here.apply(changed)
+        assert answer["changes"] == {"buses_restarted": ["lan"], "restarted": ["drive"]}
+        restarted = here.bridge.engine.devices["drive"]
+        assert restarted is not drive
+        assert restarted.scheduler.transport.bus.timeout == 0.8
+        await eventually(lambda: restarted.health.online is True)
+        await untouched.check()
+
+        removed = here.changed()
+        removed["buses"].pop()
+        removed["devices"].pop()
+        answer = await here.apply(removed)
+        assert answer["changes"] == {"buses_removed": ["lan"], "removed": ["drive"]}
+        assert sorted(here.bridge.engine.schedulers) == ["tcp"]
+        await eventually(lambda: here.observer.retained.get("modbus/drive") == b"")
+        await untouched.check()
+
+
+@pytest.mark.parametrize(
+    ("section", "change", "named"),
+    [
+        ("mqtt", {"base_topic": "site"}, "mqtt.base_topic"),
+        ("bridge", {"web": {"enabled": True, "token": "x" * 32}}, "bridge.web"),
+        (
+            "bridge",
+            {"gateway": {"enabled": True, "port": 0, "units": {1: "pump"}}},
+            "bridge.gateway",
+        ),
+    ],
+)
+async def test_a_change_that_needs_a_restart_is_refused_whole(
+    mosquitto: Broker, tmp_path: Path, section: str, change: dict[str, object], named: str
+) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "pump", "starter")
+        before = here.bridge.loaded
+        new = here.changed()
+        new[section] = new[section] | change
+        new["devices"].append(device("drive", 2))  # would be applied alone: not with it
+        new["devices"][0]["name"] = "Renamed"
+
+        answer = await here.apply(new)
+
+        assert answer["status"] == "refused"
+        assert answer["restart"] == [named]
+        assert named in answer["error"]
+        assert here.bridge.loaded is before
+        assert sorted(here.bridge.engine.devices) == ["pump", "starter"]
+        await untouched.check()
+
+
+async def test_sighup_applies_the_file_and_a_bad_file_changes_nothing(
+    mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="bridge")
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "pump", "starter")
+        new = here.changed()
+        new["devices"].append(device("drive", 2))
+        here.path.write_text(json.dumps(new), encoding="utf-8")  # JSON is YAML
+
+        here.bridge.hangup()
+
+        await eventually(lambda: published(here, ["drive"]), timeout=10)
+        await eventually(lambda: "SIGHUP: mappings changed" in caplog.text)
+        assert "SIGHUP: config changes: devices added: drive" in caplog.text
+        loaded = here.bridge.loaded
+
+        here.path.write_text("devices: [\n", encoding="utf-8")
+        caplog.clear()
+        here.bridge.hangup()
+        await eventually(lambda: "SIGHUP: mappings changed" in caplog.text)
+        assert "SIGHUP: the config file is not applied, nothing changed" in caplog.text
+        assert here.bridge.loaded is loaded
+        assert sorted(here.bridge.engine.devices) == ["drive", "pump", "starter"]
+        await untouched.check()
+
+
+async def test_nothing_changed_is_applied_as_nothing(mosquitto: Broker, tmp_path: Path) -> None:
+    async with site(mosquitto, tmp_path, TWO) as here:
+        untouched = Untouched.of(here, "pump", "starter")
+        answer = await here.apply(here.changed())
+        assert answer == {"status": "ok", "changes": {}, "description": "nothing"}
+        await asyncio.sleep(0)
+        await untouched.check()
