@@ -127,6 +127,9 @@ class Engine:
                 for companion in self.companions:
                     name = getattr(companion, "__name__", "companion")
                     group.create_task(companion(), name=name)
+                # open until cancelled: a bus restarted stops every task for a moment, and
+                # a group left with none ends (and takes no task again)
+                await asyncio.get_running_loop().create_future()
         finally:
             self._group = None
             self._tasks.clear()
