@@ -10,15 +10,20 @@ import asyncio
 import contextlib
 import json
 import logging
+import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from bridge.core.entity import PollClass
+from bridge.core.request import Write
+from bridge.errors import BridgeError, ValueRejectedError
 from tests.integration.harness import eventually, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.reconfigure_site import (
     FAST,
+    Site,
     Untouched,
     device,
     published,
@@ -260,3 +265,76 @@ async def test_nothing_changed_is_applied_as_nothing(mosquitto: Broker, tmp_path
         assert answer == {"status": "ok", "changes": {}, "description": "nothing"}
         await asyncio.sleep(0)
         await untouched.check()
+
+
+async def between_two_commands(
+    here: Site, change: dict[str, Any]
+) -> tuple[dict[str, Any], asyncio.Task[Any], list[Write]]:
+    """The starter's first command (two registers) written while ``change`` is applied: the
+    change begins at the command's first frame and a second command is sent right after it
+    (it comes after the change). Answers the change's answer, the second command's task
+    and the frames written to the starter from the first command on."""
+    dispatcher = here.bridge.dispatcher
+    values = here.bridge.engine.devices["starter"].values
+    items = {key: 20.0 if values[key] != 20.0 else 21.0 for key in FIRST_KEYS}
+    then = {SECOND_KEY: 5.0 if values[SECOND_KEY] != 5.0 else 6.0}
+    loaded = await here.load(change)
+    deadline = time.monotonic() + 10
+    writes = len(here.sim.writes)
+    started: list[asyncio.Task[Any]] = []
+    midway: list[bool] = []  # the first command had ended when its first frame came
+
+    def on_write(unit: int, write: Write) -> dict[Any, int]:
+        del write
+        if unit == 3 and not started:
+            midway.append(first.done())
+            started.append(asyncio.create_task(here.bridge.apply_config(loaded)))
+            started.append(asyncio.create_task(dispatcher.write_for("starter", then, deadline)))
+        return {}
+
+    here.sim.reactions.append(on_write)
+    first = asyncio.create_task(dispatcher.write_for("starter", items, deadline))
+    await eventually(lambda: bool(started))
+    applying, second = started
+    assert midway == [False]  # the change began in the middle of the first command
+    assert await first == items  # ended whole
+    answer = await applying
+    with contextlib.suppress(BridgeError):
+        await second
+    return answer, second, [w for unit, w in here.sim.writes[writes:] if unit == 3]
+
+
+FIRST_KEYS = ("soft_start_time", "soft_stop_time")
+SECOND_KEY = "kick_start_time"
+
+
+async def test_a_device_removed_between_two_of_its_commands(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """The command running (two registers) ends whole before the device stops; the one
+    after it is answered that the device is gone, and nothing of it is written."""
+    async with site(mosquitto, tmp_path, TWO) as here:
+        new = here.changed()
+        new["devices"].pop()
+
+        answer, second, written = await between_two_commands(here, new)
+
+        assert answer["changes"] == {"removed": ["starter"]}
+        with pytest.raises(ValueRejectedError, match="no device 'starter'"):
+            second.result()
+        assert len(written) == 2  # both of the first, nothing of the second
+
+
+async def test_a_bus_restarted_between_two_commands(mosquitto: Broker, tmp_path: Path) -> None:
+    """The command running (two registers) ends whole before its bus restarts (the old
+    port closed under it would cut it in half); the one after it runs on the new one."""
+    async with site(mosquitto, tmp_path, TWO) as here:
+        new = here.changed()
+        new["buses"][0]["timeout"] = 0.6
+
+        answer, second, written = await between_two_commands(here, new)
+
+        assert answer["changes"] == {"buses_restarted": ["tcp"], "restarted": ["pump", "starter"]}
+        assert second.result()
+        assert len(written) == 3
+        assert here.bridge.engine.devices["starter"].scheduler.transport.bus.timeout == 0.6
