@@ -40,6 +40,9 @@ The wiring: the parts call back into the bridge, and every callback is named in
   a ``mapping: sunspec`` device's mapping, built or rebuilt by ``management.sunspec``
   (bridge/sunspec_devices.py, run with the engine) -> ``Management.swap_mapping`` -> the
   same ``_reloaded``;
+- a new config (the web page after it wrote the file, SIGHUP after it read it again):
+  ``apply_config`` -> bridge/reconfigure.py, which starts, stops and restarts through the
+  engine, the dispatcher (``between_commands``) and ``state.removed``/``state.reloaded``;
 - the MQTT side: ``run_with_reconnect(session=_session, on_state=_mqtt_is)``; a session's
   publishing tasks are ``state.run``, ``state.refresh``, ``state.home_assistant_returns``
   and ``_health_reports``.
