@@ -205,6 +205,8 @@ class Engine:
         devices carry on untouched."""
         old = self.device(device_id)
         await self._stop(device_id)
+        if old.device.gateway_poll_share is not None:  # its unit may change: set again below
+            old.scheduler.fair.shares.pop(old.device.unit, None)
         poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         poller.writer.inherit(old.writer)
         poller.state.carry_counters(old.state)
