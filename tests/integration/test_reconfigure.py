@@ -88,6 +88,11 @@ async def test_a_device_removed_leaves_nothing_retained_the_others_poll_on(
         )
         assert left == {}
         assert await here.retained_now("homeassistant/device/pump/config")  # still there
+        # a command to it now: answered, nothing written
+        await here.observer.client.publish("modbus/starter/set", '{"soft_start_time": 20}')
+        await eventually(lambda: "modbus/starter/error" in here.observer.retained)
+        error = here.observer.json("modbus/starter/error")
+        assert error["error"] == "no such device"
 
 
 async def test_disabled_then_enabled_the_other_polls_on(mosquitto: Broker, tmp_path: Path) -> None:
