@@ -343,3 +343,36 @@ async def test_a_bus_restarted_between_two_commands(mosquitto: Broker, tmp_path:
         assert second.result()
         assert len(written) == 3
         assert here.bridge.engine.devices["starter"].scheduler.transport.bus.timeout == 0.6
+
+
+FACTORY_RESET = 0x102F  # the soft starter's, dangerous in its mapping
+
+
+async def raw_reset(here: Site) -> dict[str, Any]:
+    """A raw write of the starter's factory reset register, as the management API takes it."""
+    payload = json.dumps({"device": "starter", "address": FACTORY_RESET, "values": [0]})
+    answer: dict[str, Any] = json.loads(
+        await here.bridge.management.handle("device/write", payload.encode())
+    )
+    return answer
+
+
+async def test_dangerous_registers_stay_guarded_whatever_the_new_config_says(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """``allow_dangerous_writes`` is the only switch: on, the write goes; off again, it is
+    refused; and a mapping that does not mark the register keeps it guarded."""
+    async with site(mosquitto, tmp_path, TWO) as here:
+        refused = await raw_reset(here)
+        assert refused["status"] == "error"
+        assert "dangerous" in refused["error"], refused
+
+        allowed = here.changed()
+        allowed["devices"][1]["allow_dangerous_writes"] = True
+        assert (await here.apply(allowed))["changes"] == {"restarted": ["starter"]}
+        assert (await raw_reset(here))["status"] == "ok"
+
+        other = here.changed()
+        other["devices"][1] |= {"allow_dangerous_writes": False, "mapping": "vacon_nx"}
+        assert (await here.apply(other))["changes"] == {"restarted": ["starter"]}
+        assert await raw_reset(here) == refused  # vacon_nx's own guard has no 0x102F
