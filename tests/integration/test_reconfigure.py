@@ -19,6 +19,8 @@ import pytest
 from bridge.core.entity import PollClass
 from bridge.core.request import Write
 from bridge.errors import BridgeError, ValueRejectedError
+from bridge.modbus.simulator import SunSpecUnit
+from bridge.sunspec.image import build_image
 from tests.integration.harness import eventually, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.reconfigure_site import (
@@ -31,6 +33,7 @@ from tests.integration.reconfigure_site import (
     tcp_bus,
     unit_simulator,
 )
+from tests.sunspec_devices import every_image
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(120)]
 TWO = [device("pump", 1), device("starter", 3)]
@@ -376,3 +379,29 @@ async def test_dangerous_registers_stay_guarded_whatever_the_new_config_says(
         other["devices"][1] |= {"allow_dangerous_writes": False, "mapping": "vacon_nx"}
         assert (await here.apply(other))["changes"] == {"restarted": ["starter"]}
         assert await raw_reset(here) == refused  # vacon_nx's own guard has no 0x102F
+
+
+async def test_a_sunspec_device_added_is_walked_and_published_then_removed(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """Its walks start with it (bridge/sunspec_devices.py), and stop before it does."""
+    served = build_image(every_image()["inverter_mppt"], 40000, "inverter_mppt")
+    async with site(mosquitto, tmp_path, TWO, extra=(SunSpecUnit(5, served),)) as here:
+        untouched = Untouched.of(here, "pump", "starter")
+        added = here.changed()
+        sunspec = {"id": "inverter", "bus": "tcp", "unit": 5, "mapping": "sunspec"}
+        added["devices"].append(sunspec | {"poll": {"fast": FAST, "slow": 5}})
+
+        assert (await here.apply(added))["changes"] == {"added": ["inverter"]}
+
+        await eventually(lambda: published(here, ["inverter"]), timeout=30)
+        assert here.bridge.engine.devices["inverter"].mapping.entities  # built
+        await untouched.check()
+
+        removed = here.changed()
+        removed["devices"].pop()
+        assert (await here.apply(removed))["changes"] == {"removed": ["inverter"]}
+        retained = here.observer.retained
+        await eventually(lambda: retained.get("homeassistant/device/inverter/config") == b"")
+        assert here.bridge.management.sunspec.ids == []
+        await untouched.check()  # the walks ended with it: nothing failed
