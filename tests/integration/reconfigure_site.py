@@ -112,16 +112,18 @@ async def site(
     folder: Path,
     devices: list[dict[str, Any]],
     extra: tuple[SunSpecUnit, ...] = (),
+    bridge_section: dict[str, Any] | None = None,
     **mqtt: Any,
 ) -> AsyncIterator[Site]:
     """The bridge on ``devices`` (bus ``tcp``: the simulator, with the ``extra`` units;
-    ``mqtt``: more MQTT settings), every one published once."""
+    ``bridge_section`` and ``mqtt``: more settings of those sections), every one published
+    once."""
     sim = unit_simulator(*extra)
     async with contextlib.AsyncExitStack() as stack:
         port = await stack.enter_async_context(serving_tcp(sim))
         data = {
             "mqtt": {"url": broker.url, "command_expiry": 3} | mqtt,
-            "bridge": {"allow_raw_writes": True},
+            "bridge": {"allow_raw_writes": True} | (bridge_section or {}),
             "buses": [tcp_bus("tcp", port)],
             "devices": devices,
         }

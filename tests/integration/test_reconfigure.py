@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from bridge.core.entity import PollClass
+from bridge.core.gateway import Route
 from bridge.core.request import Write
 from bridge.errors import BridgeError, ValueRejectedError
 from bridge.modbus.simulator import SunSpecUnit
@@ -405,3 +406,19 @@ async def test_a_sunspec_device_added_is_walked_and_published_then_removed(
         await eventually(lambda: retained.get("homeassistant/device/inverter/config") == b"")
         assert here.bridge.management.sunspec.ids == []
         await untouched.check()  # the walks ended with it: nothing failed
+
+
+async def test_the_gateway_routes_a_unit_to_a_device_added_live(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    gateway = {"enabled": True, "port": 0, "units": {10: {"bus": "tcp", "unit": 4}}}
+    async with site(mosquitto, tmp_path, TWO, bridge_section={"gateway": gateway}) as here:
+        assert here.bridge.gateway is not None
+        assert here.bridge.gateway.routes[10] == Route("tcp", 4, None)
+        new = here.changed()
+        new["devices"].append(device("well", 4))
+
+        assert (await here.apply(new))["changes"] == {"added": ["well"]}
+
+        assert here.bridge.gateway.routes[10] == Route("tcp", 4, "well")
+        assert here.bridge.gateway.loaded is here.bridge.loaded
