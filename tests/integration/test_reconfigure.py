@@ -352,9 +352,11 @@ async def test_a_bus_restarted_between_two_commands(mosquitto: Broker, tmp_path:
 FACTORY_RESET = 0x102F  # the soft starter's, dangerous in its mapping
 
 
-async def raw_reset(here: Site) -> dict[str, Any]:
-    """A raw write of the starter's factory reset register, as the management API takes it."""
-    payload = json.dumps({"device": "starter", "address": FACTORY_RESET, "values": [0]})
+async def raw_reset(here: Site, **target: Any) -> dict[str, Any]:
+    """A raw write of the starter's factory reset register, as the management API takes it
+    (to the device, or to ``target``: a bus and unit)."""
+    target = target or {"device": "starter"}
+    payload = json.dumps(target | {"address": FACTORY_RESET, "values": [0]})
     answer: dict[str, Any] = json.loads(
         await here.bridge.management.handle("device/write", payload.encode())
     )
@@ -365,7 +367,8 @@ async def test_dangerous_registers_stay_guarded_whatever_the_new_config_says(
     mosquitto: Broker, tmp_path: Path
 ) -> None:
     """``allow_dangerous_writes`` is the only switch: on, the write goes; off again, it is
-    refused; and a mapping that does not mark the register keeps it guarded."""
+    refused; and a mapping that does not mark the register keeps it guarded, polled or
+    disabled."""
     async with site(mosquitto, tmp_path, TWO) as here:
         refused = await raw_reset(here)
         assert refused["status"] == "error"
@@ -380,6 +383,13 @@ async def test_dangerous_registers_stay_guarded_whatever_the_new_config_says(
         other["devices"][1] |= {"allow_dangerous_writes": False, "mapping": "vacon_nx"}
         assert (await here.apply(other))["changes"] == {"restarted": ["starter"]}
         assert await raw_reset(here) == refused  # vacon_nx's own guard has no 0x102F
+
+        disabled = here.changed()
+        disabled["devices"][1]["enabled"] = False
+        assert (await here.apply(disabled))["changes"] == {"disabled": ["starter"]}
+        answer = await raw_reset(here, bus="tcp", unit=3)  # not polled: still guarded
+        assert answer["status"] == "error"
+        assert "dangerous" in answer["error"], answer
 
 
 async def test_a_sunspec_device_added_is_walked_and_published_then_removed(
