@@ -426,9 +426,10 @@ def reach_at(loaded: LoadedConfig, engine: Engine, bus_id: str, unit: int) -> Re
         poller = engine.devices.get(configured.id)
         if poller is not None:  # its guard holds what earlier mappings guarded too
             device, guard = poller.device, poller.guard
-        else:
+        else:  # and what it guarded while it was polled in this run, if it was
             device = configured
             guard = _guard_of(device, loaded.mappings[device.id])
+            guard |= engine.retired.get(device.id, guard)
         neighbours.append(Neighbour(device.id, device.unit, guard, device.allow_dangerous_writes))
     return reach_of(bus.id, unit, neighbours, tcp=isinstance(bus, TcpBus))
 

@@ -12,8 +12,7 @@ answers a dict:
   ``buses_restarted``); an empty ``changes`` changed nothing running;
 - ``{"status": "refused", "error": "...", "restart": [...]}``: nothing changed, because
   part of it needs a restart: a setting of the ``mqtt`` or ``bridge`` sections (web,
-  gateway, metrics, ...), named in ``restart``, or a ``mapping: sunspec`` device added,
-  removed, enabled, disabled or changed (its walks run for the whole run).
+  gateway, metrics, ...), each named in ``restart`` (``mqtt.base_topic``, ``bridge.web``).
 
 The diff (bridge/core/config_diff.py) is found and checked whole before anything
 changes. Then, one config (or mapping reload) at a time:
@@ -32,8 +31,11 @@ changes. Then, one config (or mapping reload) at a time:
 4. devices added or enabled: a poller each; a device polled before under the same id in
    this run keeps its guard (a guard only grows: a register a mapping guarded stays
    guarded; ``allow_dangerous_writes`` is the only switch);
-5. buses no device uses any more: stopped;
-6. the config is the new one for management, the web page and the gateway's routes, and
+5. a ``mapping: sunspec`` device's walks (bridge/sunspec_devices.py) are stopped before
+   it is stopped or restarted, and started again once it is started or restarted: its
+   chain checked against its cache, or walked and built, as at a start;
+6. buses no device uses any more: stopped;
+7. the config is the new one for management, the web page and the gateway's routes, and
    info, discovery and state are published again (``StatePublisher.reloaded``).
 """
 
@@ -95,14 +97,9 @@ def view_of(loaded: LoadedConfig) -> ConfigView:
     return ConfigView(settings=settings, buses={b.id: b for b in config.buses}, devices=devices)
 
 
-def refusal(diff: ConfigDiff, old: LoadedConfig, new: LoadedConfig) -> list[str]:
+def refusal(diff: ConfigDiff) -> list[str]:
     """What of the diff needs a restart (nothing changes when anything does)."""
-    sunspec = {d.id for d in old.config.devices if d.is_sunspec}
-    sunspec |= {d.id for d in new.config.devices if d.is_sunspec}
-    touched = diff.stopped + diff.started + diff.restarted
-    return list(diff.restart) + [
-        f"devices.{d} (mapping: sunspec)" for d in sorted(set(touched) & sunspec)
-    ]
+    return list(diff.restart)
 
 
 async def apply_config(bridge: Bridge, new: LoadedConfig) -> dict[str, Any]:
@@ -110,7 +107,7 @@ async def apply_config(bridge: Bridge, new: LoadedConfig) -> dict[str, Any]:
     async with bridge.management.reloading:
         old = bridge.loaded
         diff = diff_configs(view_of(old), view_of(new))
-        restart = refusal(diff, old, new)
+        restart = refusal(diff)
         if restart:
             error = "nothing changed: these need a restart of the bridge: " + ", ".join(restart)
             log.error("config not applied: %s", error)
@@ -131,6 +128,8 @@ async def _apply(bridge: Bridge, diff: ConfigDiff, new: LoadedConfig) -> None:
     engine = bridge.engine
     devices = {d.id: d for d in new.config.devices}
     buses = {b.id: b for b in new.config.buses}
+    for device_id in diff.stopped + diff.restarted:  # no walk under a poller that changes
+        await bridge.management.sunspec.stop(device_id)
     for device_id in diff.stopped:
         await _stop(bridge, device_id)
     for bus_id in diff.buses_added:
@@ -151,6 +150,9 @@ async def _apply(bridge: Bridge, diff: ConfigDiff, new: LoadedConfig) -> None:
     for device_id in diff.started:
         engine.add_device(devices[device_id], new.mappings[device_id])
         bridge.state.restored(device_id)
+    for device_id in diff.started + diff.restarted:
+        if devices[device_id].is_sunspec:  # its chain walked (again) as at a start
+            bridge.management.sunspec.start(device_id)
     for bus_id in diff.buses_removed:
         await engine.remove_bus(bus_id)
 

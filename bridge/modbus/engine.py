@@ -82,7 +82,7 @@ class Engine:
         self._group: asyncio.TaskGroup | None = None
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._bus_tasks: dict[str, asyncio.Task[None]] = {}
-        self._retired: dict[str, Guard] = {}  # the guards of devices no longer polled
+        self.retired: dict[str, Guard] = {}  # the guards of devices no longer polled
         # work that runs while the engine runs (and stops with it): the SunSpec walks
         self.companions: list[Callable[[], Coroutine[Any, Any, None]]] = []
         for device in config.devices:
@@ -181,7 +181,7 @@ class Engine:
     def add_device(self, device: DeviceConfig, mapping: Mapping) -> DevicePoller:
         """Poll a new (or enabled) device from now on; a device polled before under this id
         keeps the guard it had (the guard only grows)."""
-        guard = self._retired.pop(device.id, UNGUARDED)
+        guard = self.retired.pop(device.id, UNGUARDED)
         self.devices[device.id] = self._poller(device, mapping, guard)
         self._start(device.id)
         return self.devices[device.id]
@@ -190,7 +190,7 @@ class Engine:
         """Stop polling a device (removed or disabled); its poller is returned."""
         await self._stop(device_id)
         poller = self.devices.pop(device_id)
-        self._retired[device_id] = poller.guard
+        self.retired[device_id] = poller.guard
         shares = poller.scheduler.fair.shares
         if poller.device.gateway_poll_share is not None:
             shares.pop(poller.device.unit, None)
@@ -205,6 +205,8 @@ class Engine:
         devices carry on untouched."""
         old = self.device(device_id)
         await self._stop(device_id)
+        if old.device.gateway_poll_share is not None:  # its unit may change: set again below
+            old.scheduler.fair.shares.pop(old.device.unit, None)
         poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         poller.writer.inherit(old.writer)
         poller.state.carry_counters(old.state)

@@ -18,7 +18,7 @@ from bridge.app import Bridge
 from bridge.config import LoadedConfig, MqttConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.modbus.poller import DevicePoller
-from bridge.modbus.simulator import SimulatedUnit, Simulator
+from bridge.modbus.simulator import SimulatedUnit, Simulator, SunSpecUnit
 from bridge.mqtt import MqttClient
 from tests.integration.harness import cancel, eventually, serving_tcp
 from tests.integration.mosquitto import Broker
@@ -28,10 +28,12 @@ FAST = 0.5  # seconds: the fast interval of every device here
 UNITS = {1: "nastec_vasco", 2: "vacon_nx", 3: "soft_starter", 4: "nastec_vasco"}
 
 
-def unit_simulator() -> Simulator:
-    """The four units of ``UNITS``, every read logged with its time."""
-    specs = [SimulatedUnit(u, load_mapping(builtin_mapping_path(n))) for u, n in UNITS.items()]
-    return Simulator(specs, tick=0, read_log=5000)
+def unit_simulator(*extra: SunSpecUnit) -> Simulator:
+    """The four units of ``UNITS`` (and ``extra``), every read logged with its time."""
+    specs: list[SimulatedUnit | SunSpecUnit] = [
+        SimulatedUnit(u, load_mapping(builtin_mapping_path(n))) for u, n in UNITS.items()
+    ]
+    return Simulator([*specs, *extra], tick=0, read_log=5000)
 
 
 def device(device_id: str, unit: int, bus: str = "tcp", **fields: Any) -> dict[str, Any]:
@@ -106,16 +108,22 @@ async def observing(broker: Broker, client_id: str, *filters: str) -> AsyncItera
 
 @contextlib.asynccontextmanager
 async def site(
-    broker: Broker, folder: Path, devices: list[dict[str, Any]], **mqtt: Any
+    broker: Broker,
+    folder: Path,
+    devices: list[dict[str, Any]],
+    extra: tuple[SunSpecUnit, ...] = (),
+    bridge_section: dict[str, Any] | None = None,
+    **mqtt: Any,
 ) -> AsyncIterator[Site]:
-    """The bridge on ``devices`` (bus ``tcp``: the simulator; ``mqtt``: more MQTT
-    settings), every one published once."""
-    sim = unit_simulator()
+    """The bridge on ``devices`` (bus ``tcp``: the simulator, with the ``extra`` units;
+    ``bridge_section`` and ``mqtt``: more settings of those sections), every one published
+    once."""
+    sim = unit_simulator(*extra)
     async with contextlib.AsyncExitStack() as stack:
         port = await stack.enter_async_context(serving_tcp(sim))
         data = {
             "mqtt": {"url": broker.url, "command_expiry": 3} | mqtt,
-            "bridge": {"allow_raw_writes": True},
+            "bridge": {"allow_raw_writes": True} | (bridge_section or {}),
             "buses": [tcp_bus("tcp", port)],
             "devices": devices,
         }

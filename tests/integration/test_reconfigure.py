@@ -17,8 +17,11 @@ from typing import Any
 import pytest
 
 from bridge.core.entity import PollClass
+from bridge.core.gateway import Route
 from bridge.core.request import Write
 from bridge.errors import BridgeError, ValueRejectedError
+from bridge.modbus.simulator import SunSpecUnit
+from bridge.sunspec.image import build_image
 from tests.integration.harness import eventually, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.reconfigure_site import (
@@ -31,6 +34,7 @@ from tests.integration.reconfigure_site import (
     tcp_bus,
     unit_simulator,
 )
+from tests.sunspec_devices import every_image
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(120)]
 TWO = [device("pump", 1), device("starter", 3)]
@@ -88,6 +92,11 @@ async def test_a_device_removed_leaves_nothing_retained_the_others_poll_on(
         )
         assert left == {}
         assert await here.retained_now("homeassistant/device/pump/config")  # still there
+        # a command to it now: answered, nothing written
+        await here.observer.client.publish("modbus/starter/set", '{"soft_start_time": 20}')
+        await eventually(lambda: "modbus/starter/error" in here.observer.retained)
+        error = here.observer.json("modbus/starter/error")
+        assert error["error"] == "no such device"
 
 
 async def test_disabled_then_enabled_the_other_polls_on(mosquitto: Broker, tmp_path: Path) -> None:
@@ -338,3 +347,88 @@ async def test_a_bus_restarted_between_two_commands(mosquitto: Broker, tmp_path:
         assert second.result()
         assert len(written) == 3
         assert here.bridge.engine.devices["starter"].scheduler.transport.bus.timeout == 0.6
+
+
+FACTORY_RESET = 0x102F  # the soft starter's, dangerous in its mapping
+
+
+async def raw_reset(here: Site, **target: Any) -> dict[str, Any]:
+    """A raw write of the starter's factory reset register, as the management API takes it
+    (to the device, or to ``target``: a bus and unit)."""
+    target = target or {"device": "starter"}
+    payload = json.dumps(target | {"address": FACTORY_RESET, "values": [0]})
+    answer: dict[str, Any] = json.loads(
+        await here.bridge.management.handle("device/write", payload.encode())
+    )
+    return answer
+
+
+async def test_dangerous_registers_stay_guarded_whatever_the_new_config_says(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """``allow_dangerous_writes`` is the only switch: on, the write goes; off again, it is
+    refused; and a mapping that does not mark the register keeps it guarded, polled or
+    disabled."""
+    async with site(mosquitto, tmp_path, TWO) as here:
+        refused = await raw_reset(here)
+        assert refused["status"] == "error"
+        assert "dangerous" in refused["error"], refused
+
+        allowed = here.changed()
+        allowed["devices"][1]["allow_dangerous_writes"] = True
+        assert (await here.apply(allowed))["changes"] == {"restarted": ["starter"]}
+        assert (await raw_reset(here))["status"] == "ok"
+
+        other = here.changed()
+        other["devices"][1] |= {"allow_dangerous_writes": False, "mapping": "vacon_nx"}
+        assert (await here.apply(other))["changes"] == {"restarted": ["starter"]}
+        assert await raw_reset(here) == refused  # vacon_nx's own guard has no 0x102F
+
+        disabled = here.changed()
+        disabled["devices"][1]["enabled"] = False
+        assert (await here.apply(disabled))["changes"] == {"disabled": ["starter"]}
+        answer = await raw_reset(here, bus="tcp", unit=3)  # not polled: still guarded
+        assert answer["status"] == "error"
+        assert "dangerous" in answer["error"], answer
+
+
+async def test_a_sunspec_device_added_is_walked_and_published_then_removed(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """Its walks start with it (bridge/sunspec_devices.py), and stop before it does."""
+    served = build_image(every_image()["inverter_mppt"], 40000, "inverter_mppt")
+    async with site(mosquitto, tmp_path, TWO, extra=(SunSpecUnit(5, served),)) as here:
+        untouched = Untouched.of(here, "pump", "starter")
+        added = here.changed()
+        sunspec = {"id": "inverter", "bus": "tcp", "unit": 5, "mapping": "sunspec"}
+        added["devices"].append(sunspec | {"poll": {"fast": FAST, "slow": 5}})
+
+        assert (await here.apply(added))["changes"] == {"added": ["inverter"]}
+
+        await eventually(lambda: published(here, ["inverter"]), timeout=30)
+        assert here.bridge.engine.devices["inverter"].mapping.entities  # built
+        await untouched.check()
+
+        removed = here.changed()
+        removed["devices"].pop()
+        assert (await here.apply(removed))["changes"] == {"removed": ["inverter"]}
+        retained = here.observer.retained
+        await eventually(lambda: retained.get("homeassistant/device/inverter/config") == b"")
+        assert here.bridge.management.sunspec.ids == []
+        await untouched.check()  # the walks ended with it: nothing failed
+
+
+async def test_the_gateway_routes_a_unit_to_a_device_added_live(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    gateway = {"enabled": True, "port": 0, "units": {10: {"bus": "tcp", "unit": 4}}}
+    async with site(mosquitto, tmp_path, TWO, bridge_section={"gateway": gateway}) as here:
+        assert here.bridge.gateway is not None
+        assert here.bridge.gateway.routes[10] == Route("tcp", 4, None)
+        new = here.changed()
+        new["devices"].append(device("well", 4))
+
+        assert (await here.apply(new))["changes"] == {"added": ["well"]}
+
+        assert here.bridge.gateway.routes[10] == Route("tcp", 4, "well")
+        assert here.bridge.gateway.loaded is here.bridge.loaded
