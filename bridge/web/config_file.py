@@ -12,17 +12,17 @@ bridge):
    bridge does not run (apply it first: SIGHUP or a restart; or undo it), so the page only
    ever applies its own change;
 2. ``store.preview(change)``: validated as ``check`` does, nothing written;
-3. the difference to the running config checked as ``bridge.apply_config`` checks it: a
-   change that needs a restart (a ``mapping: sunspec`` device) is refused before anything
-   is written;
-4. ``store.apply(change)``: written atomically with a backup, comments kept;
-5. ``bridge.apply_config(applied.loaded)``: only what changed starts, stops or restarts.
+3. ``store.apply(change)``: written atomically with a backup, comments kept;
+4. ``bridge.apply_config(applied.loaded)``: only what changed starts, stops or restarts
+   (a page change never touches what needs a restart: the ``mqtt`` and ``bridge``
+   sections; were it refused all the same, the answer says the file is written and the
+   bridge needs a restart).
 
 Refusals are ``ConfigChangeError(status, message)``: 400 for a value the config refuses
 (naming its field), 403 for a read-only config, 409 for a file changed on disk since it
 was read (``diff`` from what was read to what is there; the store reads the file again)
-or one the bridge does not run, or a change that needs a restart, 500 for a disk that
-refused the write (the file as it was). Blocking calls run in a thread.
+or one the bridge does not run, 500 for a disk that refused the write (the file as it
+was). Blocking calls run in a thread.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from bridge.errors import (
     ConfigReadOnlyError,
     ConfigWriteError,
 )
-from bridge.reconfigure import refusal, view_of
+from bridge.reconfigure import view_of
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -113,8 +113,6 @@ class ConfigFile:
             if not self._in_step and store.writable:
                 await self._check_in_step()
             try:
-                new = await asyncio.to_thread(store.preview, change)
-                self._check_live(new)
                 applied = await asyncio.to_thread(store.apply, change)
             except ConfigConflictError as exc:
                 await asyncio.to_thread(store.refresh)
@@ -128,7 +126,7 @@ class ConfigFile:
                 where = f"{exc.field}: " if exc.field else ""
                 raise ConfigChangeError(HTTPStatus.BAD_REQUEST, where + exc.message) from None
             answer = await self.bridge.apply_config(applied.loaded)
-            if answer.get("status") != "ok":  # checked in step 3: a bug if it happens
+            if answer.get("status") != "ok":
                 message = f"written, not applied: {answer.get('error')}; restart the bridge"
                 raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, message)
             return Changed(applied.summary, answer)
@@ -149,13 +147,6 @@ class ConfigFile:
             )
             raise ConfigChangeError(HTTPStatus.CONFLICT, message)
         self._in_step = True
-
-    def _check_live(self, new: LoadedConfig) -> None:
-        old = self.bridge.loaded
-        restart = refusal(diff_configs(view_of(old), view_of(new)), old, new)
-        if restart:
-            message = "this change needs a restart of the bridge: " + ", ".join(restart)
-            raise ConfigChangeError(HTTPStatus.CONFLICT, message)
 
 
 def _open(loaded: LoadedConfig) -> ConfigStore:

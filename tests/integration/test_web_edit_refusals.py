@@ -36,7 +36,6 @@ HOSTILE = [
     pytest.param("POST", PUMP, {"unit": 0}, {}, 400, "unit", id="unit-0"),
     pytest.param("POST", PUMP, {"unit": 256}, {}, 400, "unit", id="unit-256"),
     pytest.param("POST", "/api/config/devices/meter", {"unit": 248}, {}, 400, "serial lines address units 1..247", id="serial-unit-248"),
-    pytest.param("POST", "/api/config/devices/inverter", {"enabled": True}, {}, 409, "needs a restart of the bridge: devices.inverter (mapping: sunspec)", id="sunspec-needs-a-restart"),
     pytest.param("POST", PUMP, {"unit": "4"}, {}, 400, "unit", id="unit-as-text"),
     pytest.param("POST", PUMP, {"unit": True}, {}, 400, "unit", id="unit-as-bool"),
     pytest.param("POST", PUMP, {"unit": 4.0}, {}, 400, "unit", id="unit-as-float"),

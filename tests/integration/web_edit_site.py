@@ -83,11 +83,6 @@ SERIAL_DEVICE = """\
     unit: 7
     mapping: nastec_vasco
     enabled: false
-  - id: inverter   # its model chain is walked at start only
-    bus: tcp
-    unit: 9
-    mapping: sunspec
-    enabled: false
 """
 
 
@@ -123,8 +118,7 @@ async def edit_site(
     broker: Broker, folder: Path, *, serial: bool = False
 ) -> AsyncIterator[EditSite]:
     """The bridge on ``CONFIG`` (file ``folder/config.yaml``), every device published;
-    with ``serial``, a serial bus and a disabled device on it too, and a disabled
-    ``mapping: sunspec`` device."""
+    with ``serial``, a serial bus and a disabled device on it too."""
     sim = unit_simulator()
     async with contextlib.AsyncExitStack() as stack:
         modbus = await stack.enter_async_context(serving_tcp(sim))
