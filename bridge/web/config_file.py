@@ -10,7 +10,8 @@ bridge):
    to the file by hand after it is shown as a diff; then, until the file on disk loads as
    the config the bridge runs, every change is refused saying what the file holds that the
    bridge does not run (apply it first: SIGHUP or a restart; or undo it), so the page only
-   ever applies its own change;
+   ever applies its own change. A file changed by hand that the bridge runs already (a
+   SIGHUP read it) is read again and the change made to it, with no refusal;
 2. ``store.preview(change)``: validated as ``check`` does, nothing written;
 3. ``store.apply(change)``: written atomically with a backup, comments kept;
 4. ``bridge.apply_config(applied.loaded)``: only what changed starts, stops or restarts
@@ -34,7 +35,7 @@ from http import HTTPStatus
 from typing import TYPE_CHECKING, Any, Protocol
 
 from bridge.config import LoadedConfig, load_config
-from bridge.config.store import AnyChange, ConfigStore
+from bridge.config.store import AnyChange, Applied, ConfigStore
 from bridge.core.config_diff import diff_configs
 from bridge.errors import (
     ConfigConflictError,
@@ -113,18 +114,15 @@ class ConfigFile:
             if not self._in_step and store.writable:
                 await self._check_in_step()
             try:
-                applied = await asyncio.to_thread(store.apply, change)
+                applied = await _apply(store, change)
             except ConfigConflictError as exc:
                 await asyncio.to_thread(store.refresh)
                 self._in_step = False
-                raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
-            except ConfigReadOnlyError as exc:
-                raise ConfigChangeError(HTTPStatus.FORBIDDEN, exc.message) from None
-            except ConfigWriteError as exc:
-                raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, exc.message) from None
-            except ConfigEditError as exc:
-                where = f"{exc.field}: " if exc.field else ""
-                raise ConfigChangeError(HTTPStatus.BAD_REQUEST, where + exc.message) from None
+                try:  # the bridge runs the file as it is now (SIGHUP): the change goes on it
+                    await self._check_in_step()
+                except ConfigChangeError:
+                    raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
+                applied = await _apply(store, change)
             answer = await self.bridge.apply_config(applied.loaded)
             if answer.get("status") != "ok":
                 message = f"written, not applied: {answer.get('error')}; restart the bridge"
@@ -147,6 +145,22 @@ class ConfigFile:
             )
             raise ConfigChangeError(HTTPStatus.CONFLICT, message)
         self._in_step = True
+
+
+async def _apply(store: ConfigStore, change: AnyChange) -> Applied:
+    """``store.apply`` in a thread, its refusals as ConfigChangeError; a conflict raised
+    as it is (the caller looks at the file again)."""
+    try:
+        return await asyncio.to_thread(store.apply, change)
+    except ConfigConflictError:
+        raise
+    except ConfigReadOnlyError as exc:
+        raise ConfigChangeError(HTTPStatus.FORBIDDEN, exc.message) from None
+    except ConfigWriteError as exc:
+        raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, exc.message) from None
+    except ConfigEditError as exc:
+        where = f"{exc.field}: " if exc.field else ""
+        raise ConfigChangeError(HTTPStatus.BAD_REQUEST, where + exc.message) from None
 
 
 def _open(loaded: LoadedConfig) -> ConfigStore:

@@ -85,7 +85,7 @@ async def test_poll_intervals_changed_in_the_file_s_own_style(
             ["      fast: 1     # every half second", "      slow: 30s"],
         )
         await untouched.check()
-        untouched = Untouched.of(here, "drive", "starter")
+        untouched = Untouched.of(here, "drive")  # (the starter polls every second now)
         flow = await here.edit("pump", {"poll": {"fast": 2}})  # a flow mapping stays one
         assert flow.status == 200, flow.body
         lost, gained = here.diff()
@@ -164,6 +164,7 @@ async def test_dangerous_writes_need_their_own_confirmation(
 ) -> None:
     caplog.set_level(logging.INFO, logger="bridge.web")
     async with edit_site(mosquitto, tmp_path) as here:
+        untouched = Untouched.of(here, "pump", "starter")
         listed = (await here.get("/api/config/devices/drive/dangerous")).json()
         names = [e["name"] for e in listed["entities"]]
         assert names == [
@@ -201,6 +202,7 @@ async def test_dangerous_writes_need_their_own_confirmation(
         assert here.diff() == ([], ["    allow_dangerous_writes: true"])
         off = await here.edit("drive", {"allow_dangerous_writes": False})  # no step to turn off
         assert off.status == 200, off.body
+        await untouched.check()
 
 
 async def test_renamed_id_and_the_ingress_user_named_in_the_log(
@@ -271,3 +273,20 @@ async def test_the_page_reads_a_device_as_configured(mosquitto: Broker, tmp_path
         unauthorised = await http(here.port, "GET", "/api/config/devices/pump")
         assert unauthorised.status == 401
         assert AUTH  # the others carry it
+
+
+async def test_a_hand_edit_the_bridge_runs_already_is_kept_under_the_page_s_change(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    async with edit_site(mosquitto, tmp_path) as here:
+        by_hand = here.original.replace("timeout: 0.5", "timeout: 0.6")
+        here.path.write_text(by_hand, encoding="utf-8")
+        here.bridge.hangup()  # SIGHUP before any page change: the bridge runs the file
+        await eventually(lambda: here.bridge.loaded.config.buses[0].timeout == 0.6)
+
+        answer = await here.edit("pump", {"name": "Well pump"})
+
+        assert answer.status == 200, answer.body
+        assert answer.json()["changes"] == {"restarted": ["pump"]}
+        expected = by_hand.replace("name: Borehole pump   #", "name: Well pump       #")
+        assert here.path.read_text(encoding="utf-8") == expected
