@@ -1,9 +1,10 @@
-"""The config file as the page changes it: one change at a time, written by the config
-store (bridge/config/store.py), then applied to the running bridge.
+"""The config file as the page changes it: written by the config store
+(bridge/config/store.py), then applied to the running bridge. The one writer of the file
+while the bridge runs: every page change goes through ``WebApp.config_file``.
 
-``ConfigFile(bridge).change(change)`` runs, holding one lock (two page changes never
-interleave: a change written first and applied last would undo the other in the running
-bridge):
+``ConfigFile(bridge).change(*changes)`` (``AddBus`` then ``AddDevice`` on it, or one
+edit) runs, holding one lock (two page changes never interleave: a change written first
+and applied last would undo the other in the running bridge):
 
 1. the store (``bridge.loaded.path``; a config that is no file, the demo's, gets a
    read-only store), opened when the page starts serving (``open``) so that a change made
@@ -12,18 +13,20 @@ bridge):
    bridge does not run (apply it first: SIGHUP or a restart; or undo it), so the page only
    ever applies its own change. A file changed by hand that the bridge runs already (a
    SIGHUP read it) is read again and the change made to it, with no refusal;
-2. ``store.preview(change)``: validated as ``check`` does, nothing written;
-3. ``store.apply(change)``: written atomically with a backup, comments kept;
-4. ``bridge.apply_config(applied.loaded)``: only what changed starts, stops or restarts
-   (a page change never touches what needs a restart: the ``mqtt`` and ``bridge``
-   sections; were it refused all the same, the answer says the file is written and the
-   bridge needs a restart).
+2. ``store.apply(change)`` for each change in turn: validated as ``check`` does, written
+   atomically with a backup, comments kept;
+3. ``bridge.apply_config(loaded)`` once, with the config of the last change written: only
+   what changed starts, stops or restarts. Should a later change be refused, the ones
+   written before it are applied all the same (the file and the bridge never part) and
+   the refusal says what was written.
 
-Refusals are ``ConfigChangeError(status, message)``: 400 for a value the config refuses
-(naming its field), 403 for a read-only config, 409 for a file changed on disk since it
-was read (``diff`` from what was read to what is there; the store reads the file again)
-or one the bridge does not run, 500 for a disk that refused the write (the file as it
-was). Blocking calls run in a thread.
+A page change never touches what needs a restart (the ``mqtt`` and ``bridge`` sections);
+were it refused all the same, the answer says the file is written and the bridge needs a
+restart. Refusals are ``ConfigChangeError(status, message)``: 400 for a value the config
+refuses (naming its field), 403 for a read-only config, 409 for a file changed on disk
+since it was read (``diff`` from what was read to what is there; the store reads the file
+again) or one the bridge does not run, 500 for a disk that refused the write (the file
+as it was). Blocking calls run in a thread.
 """
 
 from __future__ import annotations
@@ -107,27 +110,45 @@ class ConfigFile:
                 raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, str(exc)) from None
         return self._store
 
-    async def change(self, change: AnyChange) -> Changed:
-        """Write ``change`` and apply it (see the module); ConfigChangeError if refused."""
+    async def change(self, *changes: AnyChange) -> Changed:
+        """Write ``changes`` and apply them (see the module); ConfigChangeError if refused."""
         async with self.lock:
             store = await self.store()
             if not self._in_step and store.writable:
                 await self._check_in_step()
+            written: list[Applied] = []
             try:
-                applied = await _apply(store, change)
-            except ConfigConflictError as exc:
-                await asyncio.to_thread(store.refresh)
-                self._in_step = False
-                try:  # the bridge runs the file as it is now (SIGHUP): the change goes on it
-                    await self._check_in_step()
-                except ConfigChangeError:
-                    raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
-                applied = await _apply(store, change)
-            answer = await self.bridge.apply_config(applied.loaded)
-            if answer.get("status") != "ok":
-                message = f"written, not applied: {answer.get('error')}; restart the bridge"
-                raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, message)
-            return Changed(applied.summary, answer)
+                for change in changes:
+                    written.append(await self._write(store, change))
+            except ConfigChangeError as exc:
+                if not written:
+                    raise
+                await self._run(written)
+                said = "; ".join(w.summary.splitlines()[0] for w in written)
+                raise ConfigChangeError(
+                    exc.status, f"{exc} (written and applied: {said})"
+                ) from None
+            return Changed("\n".join(w.summary for w in written), await self._run(written))
+
+    async def _write(self, store: ConfigStore, change: AnyChange) -> Applied:
+        try:
+            return await _apply(store, change)
+        except ConfigConflictError as exc:
+            await asyncio.to_thread(store.refresh)
+            self._in_step = False
+            try:  # the bridge runs the file as it is now (SIGHUP): the change goes on it
+                await self._check_in_step()
+            except ConfigChangeError:
+                raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
+            return await _apply(store, change)
+
+    async def _run(self, written: list[Applied]) -> dict[str, Any]:
+        """The config of the last change written, applied to the running bridge."""
+        answer = await self.bridge.apply_config(written[-1].loaded)
+        if answer.get("status") != "ok":
+            message = f"written, not applied: {answer.get('error')}; restart the bridge"
+            raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, message)
+        return answer
 
     async def _check_in_step(self) -> None:
         """ConfigChangeError (409) unless the file on disk loads as the running config."""
