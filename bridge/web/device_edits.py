@@ -3,7 +3,9 @@ and disable, ``allow_dangerous_writes``, remove (issue 39, item 3).
 
     GET  api/config/devices                  every configured device, enabled or not, with
                                              what the page may change of it
-    GET  api/config/devices/<id>             one of them, with ``dangerous`` (below)
+    GET  api/config/devices/<id>             one of them, with ``dangerous`` (below) and
+                                             ``writable`` (false: the config is no file
+                                             the page may write)
     GET  api/config/devices/<id>/dangerous   what ``allow_dangerous_writes`` permits: the
                                              entities by the names Home Assistant shows
     POST api/config/devices/<id>             change fields (bridge/web/edit_request.py)
@@ -122,7 +124,9 @@ class DeviceEdits:
             return _answer(HTTPStatus.OK, self._dangerous(device))
         if action:
             raise ConfigChangeError(HTTPStatus.NOT_FOUND, "no such API")
-        return _answer(HTTPStatus.OK, self._row(device) | {"dangerous": self._dangerous(device)})
+        writable = (await self.file.store()).writable
+        document = self._row(device) | {"dangerous": self._dangerous(device)}
+        return _answer(HTTPStatus.OK, document | {"writable": writable})
 
     def _row(self, device: DeviceConfig) -> dict[str, Any]:
         serial = isinstance(self._bus(device.bus), SerialBus)

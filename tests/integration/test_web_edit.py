@@ -269,6 +269,7 @@ async def test_the_page_reads_a_device_as_configured(mosquitto: Broker, tmp_path
             "enabled": True,
         }
         assert pump["poll"] == {"fast": 0.5, "slow": 5.0}
+        assert pump["writable"] is True
         assert pump["dangerous"]["entities"]  # the pump's settings
         unauthorised = await http(here.port, "GET", "/api/config/devices/pump")
         assert unauthorised.status == 401

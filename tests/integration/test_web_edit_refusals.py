@@ -175,6 +175,8 @@ async def test_the_demo_s_config_is_no_file_the_page_writes(
         listed = (await http(s.port, "GET", "/api/config/devices")).json()
         assert listed["writable"] is False and len(listed["devices"]) == 5
         device = listed["devices"][0]["id"]
+        one = (await http(s.port, "GET", f"/api/config/devices/{device}")).json()
+        assert one["writable"] is False  # the Edit panel says so, its fields off
         before = len(web_lines(caplog))
         answer = await http(s.port, "POST", f"/api/config/devices/{device}", {"name": "x"})
         assert answer.status == 403, answer.body

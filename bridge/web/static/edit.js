@@ -55,6 +55,8 @@ async function showEdit(deviceId) {
   $("#edit-dangerous-note").textContent = data.dangerous.entities.length
     ? `${data.dangerous.entities.length} settings and commands are guarded`
     : "nothing of this mapping is guarded";
+  for (const field of $("#edit-form").elements) if (field.tagName !== "FIELDSET") field.disabled = !data.writable;
+  $("#edit-read-only").hidden = data.writable;
 }
 
 // A poll interval as the API takes it: seconds as a number, or a duration ("2min").
@@ -161,7 +163,7 @@ function confirmStep(question, items, yesText) {
   $("#edit-confirm-list").hidden = !items.length;
   $("#edit-confirm-yes").textContent = yesText;
   box.hidden = false;
-  $("#edit-confirm-yes").focus();
+  $("#edit-confirm-no").focus();  // Enter alone never confirms
   return new Promise((resolve) => {
     editing.answer = (yes) => {
       editing.answer = null;
