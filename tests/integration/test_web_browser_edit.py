@@ -114,6 +114,12 @@ async def test_dangerous_writes_are_confirmed_on_the_page_naming_what_they_permi
         ]
         assert not here.bridge.engine.devices["drive"].device.allow_dangerous_writes
         assert here.diff() == ([], [])
+        assert await page.evaluate("document.activeElement.id") == "edit-confirm-no"
+        await page.evaluate("document.querySelector('#edit-confirm').scrollIntoView()")
+        shot = tmp_path / "web-edit-dangerous.png"
+        await page.screenshot(shot, 1000, 700)
+        if SCREENSHOTS:
+            shutil.copy(shot, Path(SCREENSHOTS) / shot.name)
         await click(page, "#edit-confirm-yes")
         await page.until(f"{text('#edit-status')}.startsWith('Saved:')")
         assert here.bridge.engine.devices["drive"].device.allow_dangerous_writes

@@ -95,6 +95,7 @@ async function saveEdit() {
   let answer = await editCall(path, fields);
   if (answer.status === 409 && answer.data.status === "confirm") {
     const asked = answer.data;
+    status.textContent = "Waiting for your confirmation…";
     const yes = await confirmStep(
       `Allow dangerous writes on ${editing.device.display_name}? Home Assistant and MQTT ` +
         "could then write these settings and commands:",
