@@ -22,7 +22,7 @@ from bridge.core.request import Write
 from bridge.errors import BridgeError, ValueRejectedError
 from bridge.modbus.simulator import SunSpecUnit
 from bridge.sunspec.image import build_image
-from tests.integration.harness import eventually, serving_tcp
+from tests.integration.harness import eventually, serving_serial, serving_tcp
 from tests.integration.mosquitto import Broker
 from tests.integration.reconfigure_site import (
     FAST,
@@ -38,6 +38,7 @@ from tests.sunspec_devices import every_image
 
 pytestmark = [pytest.mark.asyncio, pytest.mark.timeout(120)]
 TWO = [device("pump", 1), device("starter", 3)]
+BAUD = 57600  # a pty pair carries any rate
 
 
 def listed(here_retained: dict[str, bytes]) -> list[str]:
@@ -432,3 +433,37 @@ async def test_the_gateway_routes_a_unit_to_a_device_added_live(
 
         assert here.bridge.gateway.routes[10] == Route("tcp", 4, "well")
         assert here.bridge.gateway.loaded is here.bridge.loaded
+
+
+async def test_a_serial_bus_changed_reopens_its_port_the_other_bus_polls_on(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """A serial line's new baud rate: its port closed, then opened again with it (a serial
+    port is opened once at a time), its device polled again; the TCP bus untouched."""
+    async with contextlib.AsyncExitStack() as stack:
+        here = await stack.enter_async_context(site(mosquitto, tmp_path, TWO))
+        line = await stack.enter_async_context(serving_serial(unit_simulator(), baudrate=BAUD))
+        rtu = {"id": "rs485", "transport": "rtu", "port": line, "baudrate": BAUD, "timeout": 1}
+        added = here.changed()
+        added["buses"].append(rtu)
+        added["devices"].append(device("drive", 2, bus="rs485"))
+        assert (await here.apply(added))["changes"] == {
+            "buses_added": ["rs485"],
+            "added": ["drive"],
+        }
+        await eventually(lambda: published(here, ["drive"]), timeout=15)
+        untouched = Untouched.of(here, "pump", "starter")
+        before = here.bridge.engine.schedulers["rs485"]
+
+        faster = here.changed()
+        faster["buses"][1]["baudrate"] = 2 * BAUD
+        answer = await here.apply(faster)
+
+        assert answer["changes"] == {"buses_restarted": ["rs485"], "restarted": ["drive"]}
+        assert not before.transport.connected  # the old port closed
+        drive = here.bridge.engine.devices["drive"]
+        assert drive.scheduler is here.bridge.engine.schedulers["rs485"] is not before
+        assert drive.scheduler.transport.bus.baudrate == 2 * BAUD
+        requests = drive.health.requests
+        await eventually(lambda: drive.health.requests > requests + 2 and drive.health.online)
+        await untouched.check()
