@@ -1,0 +1,151 @@
+"""A user mapping that extends another: ``extends: <shipped name or path>`` plus entities.
+
+An override file adds entities to a base mapping (a shipped one is never edited in
+place) and may change a base entity's presentation: its name, unit, precision, poll
+interval, note, simulator range and Home Assistant classes (``OVERRIDABLE``,
+``HA_OVERRIDABLE``). It can never weaken a guard: a base entity that is dangerous,
+secret, write-only, read-only or guarded otherwise (``dangerous_below``, ``requires``)
+stays so; an override may only make a guard stronger (``dangerous: true``,
+``secret: true``, ``access: r`` on a read-write entity). A new entity is read-only
+unless it says ``access``; a writable new entity is refused on any register a base
+entity reads that is read-only or guarded. The base may not extend another (one level).
+
+``merge_override(base_data, base, data)`` returns the flat mapping data the override
+stands for, validated then by the mapping loader as any file (cross-entity and overlap
+checks included): an override loads exactly as that flat file would. Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
+
+from bridge.core.address import to_wire
+from bridge.core.entity import Access, Entity, Table
+
+if TYPE_CHECKING:
+    from bridge.core.mapping import Mapping
+
+Cell = tuple[Table, int]
+EXTENDS = "extends"
+OVERRIDABLE = frozenset({"name", "unit", "precision", "poll", "note", "simulate", "ha"})
+HA_OVERRIDABLE = frozenset(
+    {"device_class", "state_class", "icon", "enabled", "enabled_reason", "display_precision"}
+)
+_TOP = frozenset({EXTENDS, "entities"})
+_LISTED = ", ".join(sorted(OVERRIDABLE))
+_HA_LISTED = ", ".join(sorted(HA_OVERRIDABLE))
+
+
+def merge_override(
+    base_data: dict[str, Any], base: Mapping, data: dict[str, Any]
+) -> dict[str, Any]:
+    """The flat mapping data of override ``data`` on ``base`` (``base_data`` is the base
+    file as parsed); ValueError with one ``path: message`` row per line on a refusal."""
+    rows = [
+        f"{key}: an override file holds only extends and entities" for key in data.keys() - _TOP
+    ]
+    if EXTENDS in base_data:
+        rows.append(f"{EXTENDS}: the base extends another mapping (one level only)")
+    entities = data.get("entities", {})
+    if not isinstance(entities, dict) or not all(isinstance(e, dict) for e in entities.values()):
+        rows.append("entities: a mapping of entity key -> fields")
+        entities = {}
+    merged = dict(base_data["entities"])
+    guarded = _guarded_cells(base)
+    for key, fields in entities.items():
+        if key in base.entities:
+            rows += _changes_refused(str(key), base.entities[key], fields)
+            merged[key] = _with_changes(merged[key], fields)
+        else:
+            rows += _new_refused(str(key), fields, base, guarded)
+            merged[key] = fields
+    if rows:
+        raise ValueError("\n".join(rows))
+    flat = {k: v for k, v in base_data.items() if k != "library"}  # not the library's file
+    return flat | {"entities": merged}
+
+
+def _with_changes(base_fields: dict[str, Any], fields: dict[str, Any]) -> dict[str, Any]:
+    changed = base_fields | fields
+    if isinstance(fields.get("ha"), dict):
+        changed["ha"] = dict(base_fields.get("ha") or {}) | fields["ha"]
+    return changed
+
+
+def _changes_refused(key: str, base: Entity, fields: dict[str, Any]) -> Iterator[str]:
+    where = f"entities.{key}"
+    for name, value in fields.items():
+        if name in OVERRIDABLE:
+            if name == "ha" and isinstance(value, dict):
+                for ha_field in value.keys() - HA_OVERRIDABLE:
+                    yield f"{where}.ha.{ha_field}: an override may change only {_HA_LISTED}"
+            continue
+        if value == getattr(base, name, object()) or _stronger(base, name, value):
+            continue
+        guard = _guard_of(base)
+        if guard is not None and name in _GUARD_FIELDS:
+            yield f"{where}.{name}: the base marks it {guard}; an override cannot weaken a guard"
+        else:
+            yield f"{where}.{name}: an override may change only {_LISTED} of a base entity"
+
+
+_GUARD_FIELDS = frozenset({"access", "dangerous", "dangerous_below", "secret", "requires"})
+
+
+def _stronger(base: Entity, name: str, value: object) -> bool:
+    """A change that guards more: dangerous or secret on, a read-write entity read-only."""
+    if name in ("dangerous", "secret"):
+        return value is True
+    return name == "access" and value == Access.READ.value and base.access is Access.READ_WRITE
+
+
+def _guard_of(entity: Entity) -> str | None:
+    """What guards ``entity``, in words, or None."""
+    if entity.dangerous:
+        return "dangerous"
+    if entity.secret:
+        return "secret"
+    if entity.access is Access.WRITE:
+        return "write-only"
+    if entity.access is Access.READ:
+        return "read-only"
+    if entity.dangerous_below is not None or entity.requires:
+        return "guarded"
+    return None
+
+
+def _new_refused(
+    key: str, fields: dict[str, Any], base: Mapping, guarded: dict[Cell, str]
+) -> Iterator[str]:
+    """A writable new entity on a register a base entity reads that is read-only or guarded."""
+    access = fields.get("access", Access.READ.value)
+    if access == Access.READ.value:
+        return
+    try:
+        cells = _cells(Entity.model_validate(fields), base)
+    except ValueError:
+        return  # the loader reports the entity's own problems
+    for cell in sorted(cells & guarded.keys()):
+        table, wire = cell
+        yield (
+            f"entities.{key}.access: a new entity on {table.value} {wire} (wire) is read-only: "
+            f"the base's {guarded[cell]}"
+        )
+        return
+
+
+def _guarded_cells(base: Mapping) -> dict[Cell, str]:
+    """Every cell a base entity covers (whatever the device's options) that is read-only
+    or guarded -> which entity, how."""
+    cells: dict[Cell, str] = {}
+    for key, entity in base.entities.items():
+        guard = _guard_of(entity)
+        for cell in _cells(entity, base) if guard is not None else ():
+            cells.setdefault(cell, f"{key} is {guard}")
+    return cells
+
+
+def _cells(entity: Entity, base: Mapping) -> set[Cell]:
+    start = to_wire(entity.address, base.protocol.addressing)
+    return {(entity.table, a) for a in range(start, start + entity.register_count)}
