@@ -7,8 +7,9 @@ interval, note, simulator range and Home Assistant classes (``OVERRIDABLE``,
 secret, write-only, read-only or guarded otherwise (``dangerous_below``, ``requires``)
 stays so; an override may only make a guard stronger (``dangerous: true``,
 ``secret: true``, ``access: r`` on a read-write entity). A new entity is read-only
-unless it says ``access``; a writable new entity is refused on any register a base
-entity reads that is read-only or guarded. The base may not extend another (one level).
+unless it says ``access``; it is refused on any register of a guarded base entity (it
+would publish a secret, or write around the guard), and a writable one on any register
+of a read-only base entity. The base may not extend another (one level).
 
 ``merge_override(base_data, base, data)`` returns the flat mapping data the override
 stands for, validated then by the mapping loader as any file (cross-entity and overlap
@@ -116,33 +117,35 @@ def _guard_of(entity: Entity) -> str | None:
 
 
 def _new_refused(
-    key: str, fields: dict[str, Any], base: Mapping, guarded: dict[Cell, str]
+    key: str, fields: dict[str, Any], base: Mapping, guarded: dict[Cell, tuple[str, str]]
 ) -> Iterator[str]:
-    """A writable new entity on a register a base entity reads that is read-only or guarded."""
-    access = fields.get("access", Access.READ.value)
-    if access == Access.READ.value:
-        return
+    """A new entity on a register of a guarded base entity (it would publish a secret or
+    write around a guard), or a writable one on a register of a read-only base entity."""
     try:
         cells = _cells(Entity.model_validate(fields), base)
     except ValueError:
         return  # the loader reports the entity's own problems
+    writable = fields.get("access", Access.READ.value) != Access.READ.value
     for cell in sorted(cells & guarded.keys()):
-        table, wire = cell
-        yield (
-            f"entities.{key}.access: a new entity on {table.value} {wire} (wire) is read-only: "
-            f"the base's {guarded[cell]}"
-        )
-        return
+        (table, wire), (owner, guard) = cell, guarded[cell]
+        where = f"{table.value} {wire} (wire) is the base's {owner}, {guard}"
+        if guard != "read-only":
+            yield f"entities.{key}.address: {where}: a new entity may not read or write it"
+            return
+        if writable:
+            yield f"entities.{key}.access: {where}: a new entity there is read-only"
+            return
 
 
-def _guarded_cells(base: Mapping) -> dict[Cell, str]:
+def _guarded_cells(base: Mapping) -> dict[Cell, tuple[str, str]]:
     """Every cell a base entity covers (whatever the device's options) that is read-only
-    or guarded -> which entity, how."""
-    cells: dict[Cell, str] = {}
+    or guarded -> that entity's key and guard (a guard before read-only)."""
+    cells: dict[Cell, tuple[str, str]] = {}
     for key, entity in base.entities.items():
         guard = _guard_of(entity)
         for cell in _cells(entity, base) if guard is not None else ():
-            cells.setdefault(cell, f"{key} is {guard}")
+            if cells.get(cell, ("", "read-only"))[1] == "read-only":
+                cells[cell] = (key, guard)
     return cells
 
 

@@ -104,19 +104,29 @@ def test_an_override_may_guard_more(
 
 
 @pytest.mark.parametrize(
-    ("address", "guarded_by"),
-    [(1, "reset is dangerous"), (2, "password is secret"), (3, "command is write-only"),
-     (4, "voltage is read-only"), (5, "speed is guarded")],
-)  # fmt: skip
-def test_a_new_writable_entity_on_a_guarded_register_is_refused(
-    tmp_path: Path, address: int, guarded_by: str
+    ("address", "access", "row"),
+    [
+        (1, "r", "address: holding 1 (wire) is the base's reset, dangerous: a new entity may not"),
+        (2, "r", "address: holding 2 (wire) is the base's password, secret: a new entity may not"),
+        (3, "r", "address: holding 3 (wire) is the base's command, write-only: a new entity may"),
+        (5, "rw", "address: holding 5 (wire) is the base's speed, guarded: a new entity may not"),
+        (6, "r", "address: holding 6 (wire) is the base's mode, guarded: a new entity may not"),
+        (4, "rw", "access: holding 4 (wire) is the base's voltage_ok, read-only: a new entity"),
+    ],
+)
+def test_a_new_entity_on_a_guarded_register_is_refused(
+    tmp_path: Path, address: int, access: str, row: str
 ) -> None:
-    new = {"name": "Raw word", "address": address, "access": "rw"}
+    new = {"name": "Raw word", "address": address, "access": access}
     rows = refusal(override(tmp_path, {"raw": new}))
-    assert rows == [
-        f"entities.raw.access: a new entity on holding {address} (wire) is read-only: "
-        f"the base's {guarded_by}"
-    ]
+    assert len(rows) == 1 and rows[0].startswith("entities.raw." + row), rows
+
+
+def test_a_new_read_only_entity_beside_a_read_only_one_is_taken(tmp_path: Path) -> None:
+    new = {"name": "Voltage raw", "address": 4}
+    assert (
+        not load_mapping(override(tmp_path, {"voltage_raw": new})).entities["voltage_raw"].writable
+    )
 
 
 def test_a_new_writable_entity_on_a_free_register_is_taken(tmp_path: Path) -> None:
