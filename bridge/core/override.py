@@ -143,7 +143,9 @@ def _guarded_cells(base: Mapping) -> dict[Cell, tuple[str, str]]:
     cells: dict[Cell, tuple[str, str]] = {}
     for key, entity in base.entities.items():
         guard = _guard_of(entity)
-        for cell in _cells(entity, base) if guard is not None else ():
+        if guard is None:
+            continue
+        for cell in _cells(entity, base):
             if cells.get(cell, ("", "read-only"))[1] == "read-only":
                 cells[cell] = (key, guard)
     return cells
