@@ -210,7 +210,10 @@ def _with_override(device: DeviceConfig, path: Path, state_dir: Path) -> Path:
     """The device's override file (bridge/config/user_mapping.py) when there is one, else
     ``path``; MappingError when it extends another mapping than ``path``."""
     override = override_path(state_dir, device.id)
-    if not override.is_file() or override.resolve() == path.resolve():
+    try:
+        if not override.is_file() or override.resolve() == path.resolve():
+            return path
+    except (OSError, ValueError):  # an id no file can be named after has no override
         return path
     try:
         ref = read_yaml(override).get(EXTENDS)
