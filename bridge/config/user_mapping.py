@@ -17,13 +17,24 @@ from __future__ import annotations
 import io
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ruamel.yaml import YAML
 from ruamel.yaml.comments import CommentedMap
+from ruamel.yaml.error import YAMLError
 
+from bridge.config.model import DeviceConfig
+from bridge.core.mapping import (
+    Mapping,
+    builtin_mapping_names,
+    check_mapping_text,
+    load_mapping,
+    resolve_mapping_path,
+)
 from bridge.core.override import EXTENDS
+from bridge.errors import MappingError
 
 FOLDER = "mappings"  # under bridge.state_dir
 HEADER = (
@@ -54,6 +65,51 @@ def entity_added(text: str | None, base: str, key: str, fields: dict[str, Any]) 
     out = io.StringIO()
     yaml.dump(document, out)
     return out.getvalue()
+
+
+@dataclass(frozen=True, slots=True)
+class Proposed:
+    """A device's override with one entity more, checked by the mapping loader: ``text``
+    to write at ``path`` (where ``before`` stood; None: no file yet), loading as ``mapping``."""
+
+    path: Path
+    before: str | None
+    text: str
+    mapping: Mapping
+
+
+def propose(
+    device: DeviceConfig, config_dir: Path, state_dir: Path, key: str, fields: dict[str, Any]
+) -> Proposed:
+    """The device's override with entity ``key`` added; MappingError naming the override
+    file with every problem the loader finds (a key the mapping has, a guard, an overlap)."""
+    if device.is_sunspec:
+        raise MappingError(device.id, ["mapping: a SunSpec device's mapping is built, not edited"])
+    base = resolve_mapping_path(device.mapping, config_dir)
+    path = override_path(state_dir, device.id)
+    if device.mapping in builtin_mapping_names():
+        ref = device.mapping
+    elif base.resolve() == path.resolve():
+        ref = ""  # the device names its override already: the file says what it extends
+    else:
+        ref = str(base.resolve())
+    try:
+        before = path.read_text(encoding="utf-8") if path.is_file() else None
+    except OSError as exc:
+        raise MappingError(str(path), [f"cannot read it: {exc.strerror}"]) from None
+    now = (
+        check_mapping_text(before, str(path)).mapping if before is not None else load_mapping(base)
+    )
+    if now is not None and key in now.entities:
+        raise MappingError(str(path), [f"entities.{key}: the mapping has this entity already"])
+    try:
+        text = entity_added(before, ref, key, fields)
+    except (ValueError, YAMLError) as exc:
+        raise MappingError(str(path), [str(exc)]) from None
+    report = check_mapping_text(text, str(path))
+    if report.mapping is None:
+        raise MappingError(str(path), list(report.errors))
+    return Proposed(path, before, text, report.mapping)
 
 
 def write_atomic(path: Path, text: str) -> None:
