@@ -277,7 +277,8 @@ def _extended(data: dict[str, Any], source: str) -> dict[str, Any]:
     if report.mapping is None:
         raise MappingError(source, [f"{EXTENDS}: {path}: {row}" for row in report.errors])
     try:
-        return merge_override(base_data, report.mapping, data)
+        base = report.mapping
+        return merge_override(base_data, base.entities, base.protocol.addressing, data)
     except ValueError as exc:
         raise MappingError(source, str(exc).splitlines()) from None
 

@@ -11,21 +11,18 @@ unless it says ``access``; it is refused on any register of a guarded base entit
 would publish a secret, or write around the guard), and a writable one on any register
 of a read-only base entity. The base may not extend another (one level).
 
-``merge_override(base_data, base, data)`` returns the flat mapping data the override
+``merge_override(base_data, base, addressing, data)`` returns the flat mapping data the override
 stands for, validated then by the mapping loader as any file (cross-entity and overlap
 checks included): an override loads exactly as that flat file would. Pure.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from collections.abc import Iterator, Mapping
+from typing import Any
 
-from bridge.core.address import to_wire
+from bridge.core.address import Addressing, to_wire
 from bridge.core.entity import Access, Entity, Table
-
-if TYPE_CHECKING:
-    from bridge.core.mapping import Mapping
 
 Cell = tuple[Table, int]
 EXTENDS = "extends"
@@ -39,10 +36,14 @@ _HA_LISTED = ", ".join(sorted(HA_OVERRIDABLE))
 
 
 def merge_override(
-    base_data: dict[str, Any], base: Mapping, data: dict[str, Any]
+    base_data: dict[str, Any],
+    base: Mapping[str, Entity],
+    addressing: Addressing,
+    data: dict[str, Any],
 ) -> dict[str, Any]:
-    """The flat mapping data of override ``data`` on ``base`` (``base_data`` is the base
-    file as parsed); ValueError with one ``path: message`` row per line on a refusal."""
+    """The flat mapping data of override ``data`` on the entities ``base`` (``base_data``
+    is the base file as parsed, ``addressing`` its rule); ValueError with one
+    ``path: message`` row per line on a refusal."""
     rows = [
         f"{key}: an override file holds only extends and entities" for key in data.keys() - _TOP
     ]
@@ -53,13 +54,13 @@ def merge_override(
         rows.append("entities: a mapping of entity key -> fields")
         entities = {}
     merged = dict(base_data["entities"])
-    guarded = _guarded_cells(base)
+    guarded = _guarded_cells(base, addressing)
     for key, fields in entities.items():
-        if key in base.entities:
-            rows += _changes_refused(str(key), base.entities[key], fields)
+        if key in base:
+            rows += _changes_refused(str(key), base[key], fields)
             merged[key] = _with_changes(merged[key], fields)
         else:
-            rows += _new_refused(str(key), fields, base, guarded)
+            rows += _new_refused(str(key), fields, addressing, guarded)
             merged[key] = fields
     if rows:
         raise ValueError("\n".join(rows))
@@ -117,12 +118,12 @@ def _guard_of(entity: Entity) -> str | None:
 
 
 def _new_refused(
-    key: str, fields: dict[str, Any], base: Mapping, guarded: dict[Cell, tuple[str, str]]
+    key: str, fields: dict[str, Any], addressing: Addressing, guarded: dict[Cell, tuple[str, str]]
 ) -> Iterator[str]:
     """A new entity on a register of a guarded base entity (it would publish a secret or
     write around a guard), or a writable one on a register of a read-only base entity."""
     try:
-        cells = _cells(Entity.model_validate(fields), base)
+        cells = _cells(Entity.model_validate(fields), addressing)
     except ValueError:
         return  # the loader reports the entity's own problems
     writable = fields.get("access", Access.READ.value) != Access.READ.value
@@ -137,20 +138,22 @@ def _new_refused(
             return
 
 
-def _guarded_cells(base: Mapping) -> dict[Cell, tuple[str, str]]:
+def _guarded_cells(
+    base: Mapping[str, Entity], addressing: Addressing
+) -> dict[Cell, tuple[str, str]]:
     """Every cell a base entity covers (whatever the device's options) that is read-only
     or guarded -> that entity's key and guard (a guard before read-only)."""
     cells: dict[Cell, tuple[str, str]] = {}
-    for key, entity in base.entities.items():
+    for key, entity in base.items():
         guard = _guard_of(entity)
         if guard is None:
             continue
-        for cell in _cells(entity, base):
+        for cell in _cells(entity, addressing):
             if cells.get(cell, ("", "read-only"))[1] == "read-only":
                 cells[cell] = (key, guard)
     return cells
 
 
-def _cells(entity: Entity, base: Mapping) -> set[Cell]:
-    start = to_wire(entity.address, base.protocol.addressing)
+def _cells(entity: Entity, addressing: Addressing) -> set[Cell]:
+    start = to_wire(entity.address, addressing)
     return {(entity.table, a) for a in range(start, start + entity.register_count)}

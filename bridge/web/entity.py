@@ -22,18 +22,18 @@ import json
 import logging
 from http import HTTPStatus
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from pydantic import ValidationError
 
+from bridge.config import LoadedConfig
 from bridge.config.user_mapping import Proposed, propose, restore, write_atomic
 from bridge.core.entity_proposal import EntityProposal, entity_fields, preview
 from bridge.core.mapping import format_validation_errors
 from bridge.errors import MappingError
+from bridge.management import Management
+from bridge.modbus.engine import Engine
 from bridge.web.http import Request, Response
-
-if TYPE_CHECKING:
-    from bridge.web.server import BridgeState
 
 ROUTES = frozenset({"/api/entity/preview", "/api/entity/add"})
 MAX_ROWS = 10  # problems answered at most (each names its field)
@@ -52,10 +52,21 @@ class RefusedError(Exception):
         self.rows = [_one_line(row, ROW_LIMIT) for row in rows[:MAX_ROWS]]
 
 
+class BridgeParts(Protocol):
+    """What these routes use of the running bridge (bridge/web/server.py's BridgeState)."""
+
+    @property
+    def loaded(self) -> LoadedConfig: ...
+    @property
+    def engine(self) -> Engine: ...
+    @property
+    def management(self) -> Management: ...
+
+
 class EntityRoutes:
     """Preview and add; one add at a time (the override is read, edited and replaced)."""
 
-    def __init__(self, bridge: BridgeState) -> None:
+    def __init__(self, bridge: BridgeParts) -> None:
         self.bridge = bridge
         self._adding = asyncio.Lock()
 
