@@ -2,7 +2,8 @@
 
     POST api/entity/preview   {device, key, name, address, type, ..., words?} -> the value
                               as Home Assistant would show it (``words``: the registers
-                              the commissioning read gave; without them, read once)
+                              the commissioning read gave; without them, or too few for
+                              the type, read once as ``device/read`` reads)
     POST api/entity/add       the same -> the device's override file written, the device's
                               mapping reloaded: {path, mapping, key, changed}
 
@@ -104,9 +105,9 @@ class EntityRoutes:
 
     async def _preview(self, proposal: EntityProposal) -> dict[str, Any]:
         proposed = await self._proposed(proposal)
+        count = proposed.mapping.points()[proposal.key].count
         words = proposal.words
-        if words is None:
-            count = proposed.mapping.points()[proposal.key].count
+        if words is None or len(words) < count:  # not read yet, or not all of it
             words = await self._read(proposal, count)
         try:
             shown = preview(proposed.mapping, proposal.key, words)
