@@ -96,9 +96,24 @@ async def test_a_raw_register_becomes_an_entity_home_assistant_discovers(
             ] != 231.5:
                 await asyncio.sleep(0.05)
         assert found["unit"] == "V"
+        first = path.read_text(encoding="utf-8")
+        again = await http(s.port, "POST", "/api/entity/add", PROPOSAL)
+        assert again.status == 422 and "has this entity already" in again.body.decode()
+        assert path.read_text(encoding="utf-8") == first  # a refusal writes nothing
+        second = PROPOSAL | {"key": "spare_word", "name": "Spare word", "address": FREE + 1}
+        del second["scale"], second["unit"], second["device_class"], second["state_class"]
+        added = await http(s.port, "POST", "/api/entity/add", second)
+        assert added.status == 200, added.body
+        assert path.read_text(encoding="utf-8") == first + (
+            "  spare_word:\n    name: Spare word\n    address: 33\n"
+        )  # the file as it was, one entity more
+        async with asyncio.timeout(10):
+            while await value_of(s.port, "spare_word") is None:
+                await asyncio.sleep(0.05)
+        assert (await value_of(s.port, "spare_voltage")) is not None
         assert not s.sim.writes
     text = path.read_text(encoding="utf-8")
-    assert text.splitlines()[2:] == [
+    assert text.splitlines()[2:-3] == [
         "extends: smartgen_hgm6100",
         "entities:",
         "  spare_voltage:",
@@ -139,6 +154,8 @@ BAD = [
     ),
     ("no such device", PUMP_PROPOSAL | {"device": "nope"}, {}, 404, "no device 'nope'"),
     ("a bad combination", PUMP_PROPOSAL | {"type": "u16", "count": 2}, {}, 422, "count is given"),
+    ("a writable entity", PUMP_PROPOSAL | {"access": "rw"}, {}, 400, "access: Extra inputs"),
+    ("too many words", PUMP_PROPOSAL | {"words": [0] * 126}, {}, 400, "words: Tuple should"),
     ("another site", PUMP_PROPOSAL, {"Origin": "http://evil.example"}, 403, "other sites"),
     ("not JSON", PUMP_PROPOSAL, {"Content-Type": "text/plain"}, 415, "send JSON"),
 ]
