@@ -85,7 +85,9 @@ class EntityRoutes:
             said = _one_line(str(refused))
             log.warning("entity %s from %s refused (%d): %s", action, who, refused.status, said)
             return _answer(refused.status, {"status": "error", "errors": refused.rows})
-        log.info("entity %s from %s: %s.%s %s", action, who, proposal.device, proposal.key, data)
+        what = data["entity"] if action == "preview" else data
+        said = _one_line(f"{proposal.device}.{proposal.key} {json.dumps(what, default=str)}")
+        log.info("entity %s from %s: %s", action, who, said)
         return _answer(HTTPStatus.OK, {"status": "ok", "data": data})
 
     async def _proposed(self, proposal: EntityProposal) -> Proposed:
@@ -136,6 +138,7 @@ class EntityRoutes:
             await asyncio.to_thread(restore, proposed.path, proposed.before)
             raise RefusedError(HTTPStatus.UNPROCESSABLE_ENTITY, [f"reload: {answer['error']}"])
         return {
+            "entity": _entity_of(proposed, proposal.key),
             "path": str(proposed.path),
             "mapping": str(_shown_path(proposed.path, self.bridge.loaded.path.parent)),
             "key": proposal.key,

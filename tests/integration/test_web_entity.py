@@ -53,8 +53,9 @@ async def value_of(port: int, key: str) -> dict[str, Any] | None:
 
 @pytest.mark.asyncio
 async def test_a_raw_register_becomes_an_entity_home_assistant_discovers(
-    mosquitto: Broker, tmp_path: Path
+    mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
+    caplog.set_level(logging.INFO, logger="bridge.web.entity")
     shipped = builtin_mapping_path("smartgen_hgm6100").read_bytes()
     async with genset_site(mosquitto, tmp_path) as s:
         s.sim._device(GENSET).image[(Table.HOLDING, FREE)] = 2315  # what the unit holds there
@@ -74,7 +75,16 @@ async def test_a_raw_register_becomes_an_entity_home_assistant_discovers(
             assert added.status == 200, added.body
             data = added.json()["data"]
             path = override_path(tmp_path / STATE, "genset")
+            said = 'entity add from 127.0.0.1: genset.spare_voltage {"entity": {"name"'
+            assert said in caplog.text  # who added what, for the site's records
             assert data == {
+                "entity": {
+                    "name": "Spare voltage",
+                    "address": FREE,
+                    "scale": 0.1,
+                    "unit": "V",
+                    "ha": {"device_class": "voltage", "state_class": "measurement"},
+                },
                 "path": str(path),
                 "mapping": "state/mappings/genset.yaml",
                 "key": "spare_voltage",
