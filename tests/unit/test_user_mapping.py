@@ -7,9 +7,16 @@ from pathlib import Path
 
 import pytest
 
-from bridge.config import load_config
-from bridge.config.user_mapping import entity_added, override_path, restore, write_atomic
-from bridge.errors import ConfigError
+from bridge.config import DeviceConfig, load_config
+from bridge.config.user_mapping import (
+    entity_added,
+    override_path,
+    propose,
+    restore,
+    write_atomic,
+)
+from bridge.core.mapping import builtin_mapping_path
+from bridge.errors import ConfigError, MappingError
 
 CONFIG = """\
 mqtt: {url: mqtt://127.0.0.1:1883}
@@ -80,3 +87,46 @@ def test_restore_puts_the_file_back(tmp_path: Path) -> None:
     assert path.read_text(encoding="utf-8") == "one"
     restore(path, None)
     assert not path.exists()
+
+
+def device(mapping: str) -> DeviceConfig:
+    return DeviceConfig.model_validate(
+        {"id": "pump", "bus": "rs485", "unit": 1, "mapping": mapping}
+    )
+
+
+def test_propose_extends_a_file_by_its_absolute_path(tmp_path: Path) -> None:
+    (tmp_path / "mine.yaml").write_text(
+        builtin_mapping_path("nastec_vasco").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    proposed = propose(device("mine.yaml"), tmp_path, tmp_path / "state", "spare", SPARE)
+    assert proposed.before is None
+    assert f"extends: {(tmp_path / 'mine.yaml').resolve()}" in proposed.text
+    assert proposed.mapping.entities["spare"].scale == 0.1
+
+
+def test_propose_adds_to_the_override_a_device_names(tmp_path: Path) -> None:
+    state = tmp_path / "state"
+    path = override_path(state, "pump")
+    write_atomic(path, entity_added(None, "nastec_vasco", "spare", SPARE))
+    named = device(str(path))
+    second = {"name": "Spare 2", "address": 0x63}
+    proposed = propose(named, tmp_path, state, "spare_2", second)
+    assert set(proposed.mapping.entities) >= {"spare", "spare_2"}
+    assert proposed.text.startswith(proposed.before or "-")
+
+
+@pytest.mark.parametrize(
+    ("mapping", "key", "row"),
+    [
+        ("nastec_vasco", "power", "entities.power: the mapping has this entity already"),
+        ("sunspec", "x", "mapping: a SunSpec device's mapping is built, not edited"),
+    ],
+)
+def test_propose_refuses_a_taken_key_and_a_built_mapping(
+    tmp_path: Path, mapping: str, key: str, row: str
+) -> None:
+    with pytest.raises(MappingError) as caught:
+        propose(device(mapping), tmp_path, tmp_path / "state", key, SPARE)
+    assert caught.value.issues == (row,)
+    assert not (tmp_path / "state").exists()
