@@ -47,8 +47,6 @@ def merge_override(
     rows = [
         f"{key}: an override file holds only extends and entities" for key in data.keys() - _TOP
     ]
-    if EXTENDS in base_data:
-        rows.append(f"{EXTENDS}: the base extends another mapping (one level only)")
     entities = data.get("entities", {})
     if not isinstance(entities, dict) or not all(isinstance(e, dict) for e in entities.values()):
         rows.append("entities: a mapping of entity key -> fields")

@@ -178,3 +178,34 @@ def test_an_override_loads_as_the_flat_file_of_its_content(tmp_path: Path) -> No
     assert merged == alone
     assert merged.points() == alone.points()
     assert merged.points({"family": "mida"}) == alone.points({"family": "mida"})
+
+
+def test_entities_of_an_override_are_a_mapping_of_fields(tmp_path: Path) -> None:
+    path = write(tmp_path, "base.yaml", BASE)
+    path = write(tmp_path, "mine.yaml", {"extends": path.name, "entities": ["voltage"]})
+    assert refusal(path) == ["entities: a mapping of entity key -> fields"]
+
+
+@pytest.mark.parametrize(
+    ("fields", "row"),
+    [
+        ({"name": "No address"}, "entities.raw.address: Field required"),
+        ({"name": "Far", "address": 70000, "access": "rw"}, "entities.raw.address: "),
+    ],
+)
+def test_a_new_entity_is_checked_by_the_loader(
+    tmp_path: Path, fields: dict[str, Any], row: str
+) -> None:
+    rows = refusal(override(tmp_path, {"raw": fields}))
+    assert any(r.startswith(row) for r in rows), rows
+
+
+def test_a_bad_extends_or_a_bad_base_is_named(tmp_path: Path) -> None:
+    odd = write(tmp_path, "odd.yaml", {"extends": 5, "entities": {}})
+    assert refusal(odd) == ["extends: a shipped mapping name or a .yaml path"]
+    broken = write(tmp_path, "broken.yaml", BASE | {"entities": {"x": {"name": "X"}}})
+    bad = write(tmp_path, "bad.yaml", {"extends": broken.name, "entities": {}})
+    assert refusal(bad) == [f"extends: {broken}: entities.x.address: Field required"]
+    (tmp_path / "text.yaml").write_text("a: [", encoding="utf-8")
+    unparsed = write(tmp_path, "unparsed.yaml", {"extends": "text.yaml", "entities": {}})
+    assert refusal(unparsed)[0].startswith("extends: text.yaml: ")
