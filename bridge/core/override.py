@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from bridge.core.address import Addressing, to_wire
+from bridge.core.address import Addressing, PrintedAddress, to_wire
 from bridge.core.entity import Access, Entity, Table
 
 Cell = tuple[Table, int]
@@ -119,21 +119,25 @@ def _new_refused(
     key: str, fields: dict[str, Any], addressing: Addressing, guarded: dict[Cell, tuple[str, str]]
 ) -> Iterator[str]:
     """A new entity on a register of a guarded base entity (it would publish a secret or
-    write around a guard), or a writable one on a register of a read-only base entity."""
+    write around a guard), or a writable one on a register of a read-only base entity; its
+    ``write_address`` counts as its own register."""
     try:
-        cells = _cells(Entity.model_validate(fields), addressing)
+        entity = Entity.model_validate(fields)
+        spans = {"address": _cells(entity, addressing)}
+        if entity.writable and entity.write_address is not None:
+            spans["write_address"] = _cells(entity, addressing, entity.write_address)
     except ValueError:
         return  # the loader reports the entity's own problems
-    writable = fields.get("access", Access.READ.value) != Access.READ.value
-    for cell in sorted(cells & guarded.keys()):
-        (table, wire), (owner, guard) = cell, guarded[cell]
-        where = f"{table.value} {wire} (wire) is the base's {owner}, {guard}"
-        if guard != "read-only":
-            yield f"entities.{key}.address: {where}: a new entity may not read or write it"
-            return
-        if writable:
-            yield f"entities.{key}.access: {where}: a new entity there is read-only"
-            return
+    for field, cells in spans.items():
+        for cell in sorted(cells & guarded.keys()):
+            (table, wire), (owner, guard) = cell, guarded[cell]
+            where = f"{table.value} {wire} (wire) is the base's {owner}, {guard}"
+            if guard != "read-only":
+                yield f"entities.{key}.{field}: {where}: a new entity may not read or write it"
+                return
+            if entity.writable:
+                yield f"entities.{key}.access: {where}: a new entity there is read-only"
+                return
 
 
 def _guarded_cells(
@@ -146,12 +150,17 @@ def _guarded_cells(
         guard = _guard_of(entity)
         if guard is None:
             continue
-        for cell in _cells(entity, addressing):
+        written = entity.write_address if entity.writable else None
+        both = _cells(entity, addressing) | _cells(entity, addressing, written)
+        for cell in both:
             if cells.get(cell, ("", "read-only"))[1] == "read-only":
                 cells[cell] = (key, guard)
     return cells
 
 
-def _cells(entity: Entity, addressing: Addressing) -> set[Cell]:
-    start = to_wire(entity.address, addressing)
+def _cells(
+    entity: Entity, addressing: Addressing, printed: PrintedAddress | None = None
+) -> set[Cell]:
+    """The registers (or bits) of ``entity`` from its address (or ``printed``) on."""
+    start = to_wire(entity.address if printed is None else printed, addressing)
     return {(entity.table, a) for a in range(start, start + entity.register_count)}

@@ -112,12 +112,19 @@ def test_an_override_may_guard_more(
         (5, "rw", "address: holding 5 (wire) is the base's speed, guarded: a new entity may not"),
         (6, "r", "address: holding 6 (wire) is the base's mode, guarded: a new entity may not"),
         (4, "rw", "access: holding 4 (wire) is the base's voltage_ok, read-only: a new entity"),
+        (
+            {"address": 20, "write_address": 1},
+            "rw",
+            "write_address: holding 1 (wire) is the "
+            "base's reset, dangerous: a new entity may not read or write it",
+        ),
     ],
 )
 def test_a_new_entity_on_a_guarded_register_is_refused(
-    tmp_path: Path, address: int, access: str, row: str
+    tmp_path: Path, address: int | dict[str, int], access: str, row: str
 ) -> None:
-    new = {"name": "Raw word", "address": address, "access": access}
+    at = address if isinstance(address, dict) else {"address": address}
+    new = {"name": "Raw word", "access": access} | at
     rows = refusal(override(tmp_path, {"raw": new}))
     assert len(rows) == 1 and rows[0].startswith("entities.raw." + row), rows
 
