@@ -34,10 +34,12 @@ from bridge.config.model import (
     reference_errors,
 )
 from bridge.config.mqtt import MqttConfig
+from bridge.config.user_mapping import override_path
 from bridge.core.counters import counters_of
 from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
 from bridge.core.mapping import resolve_mapping_path as _resolve
-from bridge.core.yaml_source import parse_yaml
+from bridge.core.override import EXTENDS
+from bridge.core.yaml_source import parse_yaml, read_yaml
 from bridge.errors import ConfigError, MappingError
 from bridge.sunspec import cache as sunspec_cache
 
@@ -169,6 +171,8 @@ def load_device_mapping(
     """A device's mapping (relative paths from ``base``) and every problem with it for
     this device, as ``devices.<id>.<field>: message`` rows: the file itself, the device's
     options, a transport the model does not speak. The mapping is None if it cannot load.
+    The device's override under ``state_dir`` (bridge/config/user_mapping.py) is its
+    mapping when it exists.
     A ``mapping: sunspec`` device's is the one cached under ``state_dir`` (bridge/sunspec/
     cache.py), else one with no entity until its chain is walked (bridge/sunspec_devices.py)."""
     where = f"devices.{device.id}"
@@ -176,7 +180,9 @@ def load_device_mapping(
     if device.is_sunspec:
         return _sunspec_mapping(device, bus, state_dir or base / DEFAULT_STATE)
     try:
-        path = _resolve(device.mapping, base)
+        path = _with_override(
+            device, _resolve(device.mapping, base), state_dir or base / DEFAULT_STATE
+        )
         mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
     except MappingError as exc:
         return None, [f"{where}.mapping: {exc.source}: {issue}" for issue in exc.issues]
@@ -198,6 +204,31 @@ def load_device_mapping(
     if bus.transport == "ascii" and "ascii" not in mapping.protocol.transports:
         errors.append(f"{where}.bus: {mapping.model} does not speak Modbus ASCII")
     return mapping, errors
+
+
+def _with_override(device: DeviceConfig, path: Path, state_dir: Path) -> Path:
+    """The device's override file (bridge/config/user_mapping.py) when there is one, else
+    ``path``; MappingError when it extends another mapping than ``path``."""
+    override = override_path(state_dir, device.id)
+    try:
+        if not override.is_file() or override.resolve() == path.resolve():
+            return path
+    except (OSError, ValueError):  # an id no file can be named after has no override
+        return path
+    try:
+        ref = read_yaml(override).get(EXTENDS)
+        extended = _resolve(ref, override.parent) if isinstance(ref, str) else None
+    except (OSError, ValueError, AttributeError) as exc:
+        raise MappingError(str(override), [f"cannot read it: {exc}"]) from None
+    if extended is None or extended.resolve() != path.resolve():
+        raise MappingError(
+            str(override),
+            [
+                f"extends {ref!r}, not the device's mapping {device.mapping!r}: remove the "
+                "file or make it extend the device's mapping"
+            ],
+        )
+    return override
 
 
 def _sunspec_mapping(

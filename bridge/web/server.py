@@ -14,6 +14,8 @@
     POST api/request/device/scan|read|write   the management request of the same name,
                                          run by bridge/management.py with its limits and
                                          guards; answered like bridge/response/<cmd>
+    POST api/entity/preview|add          a raw register as a new entity of a device's
+                                         mapping (bridge/web/entity.py)
 
 Every ``api/`` route but ``login`` needs access (bridge/web/access.py); every POST must
 come from the page itself. At most ``MAX_REQUESTS`` commissioning requests run at once.
@@ -27,7 +29,7 @@ import json
 import logging
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
@@ -39,6 +41,8 @@ from bridge.core.topics import Topics
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.web.access import Access, Refusal, change_refusal
+from bridge.web.entity import ROUTES as ENTITY_ROUTES
+from bridge.web.entity import EntityRoutes
 from bridge.web.http import EventSink, EventStream, Request, Response
 from bridge.web.live import WebFeed
 from bridge.web.views import BusWindow, changed_values, device_document, overview
@@ -52,6 +56,7 @@ COMMISSIONING = frozenset({"device/scan", "device/identify", "device/read", "dev
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
+    "/entity.js": "text/javascript; charset=utf-8",
 }
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
@@ -106,6 +111,7 @@ class WebApp:
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
+        self.entities = EntityRoutes(bridge)
 
     async def handle(self, request: Request) -> Response | EventStream:
         path, method = request.path, request.method
@@ -120,6 +126,8 @@ class WebApp:
             return _error(refusal.status, refusal.message)
         if path.startswith("/api/request/"):
             return await self._request(request, path.removeprefix("/api/request/"))
+        if path in ENTITY_ROUTES:
+            return await self._change(request, self.entities.handle)
         if method not in ("GET", "HEAD"):
             return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
         return self._read(request)
@@ -236,6 +244,25 @@ class WebApp:
                     await sink.send("overview", self._fresh("overview", self.overview).decode())
                     sent = time.monotonic()
                 await asyncio.sleep(SEND_GAP)
+
+    async def _change(
+        self, request: Request, run: Callable[[Request], Awaitable[Response]]
+    ) -> Response:
+        """A change from the page: a POST of JSON from the page itself, ``MAX_REQUESTS``
+        at most running with the commissioning requests."""
+        if request.method != "POST":
+            return _error(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        refusal = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            log.warning("change refused from %s: %s", request.peer, refusal.message)
+            return _error(refusal.status, refusal.message)
+        if self.running >= MAX_REQUESTS:
+            return _error(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        self.running += 1
+        try:
+            return await run(request)
+        finally:
+            self.running -= 1
 
     # --- commissioning ----------------------------------------------------------------
 

@@ -1,0 +1,143 @@
+"""A device's user mapping: the override file the page writes, and where it lives.
+
+A device's override is ``<bridge.state_dir>/mappings/<device id>.yaml`` (the folder the
+bridge writes what it learns of devices in; relative to the config file). It says
+``extends: <the device's mapping>`` and holds the entities added on the page
+(bridge/core/override.py has what an override may say). When it exists, the loader
+takes it as the device's mapping (``load_device_mapping``); a shipped mapping is never
+written. An override that extends another mapping than the device's config names is an
+error naming both, never taken silently.
+
+``entity_added`` edits the file's text with ruamel.yaml's round trip, so a user's
+comments and key order stay; ``write_atomic`` replaces it with a temp file and a rename.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ruamel.yaml import YAML
+from ruamel.yaml.comments import CommentedMap
+from ruamel.yaml.error import YAMLError
+
+from bridge.config.model import DeviceConfig
+from bridge.core.mapping import (
+    Mapping,
+    builtin_mapping_names,
+    check_mapping_text,
+    load_mapping,
+    resolve_mapping_path,
+)
+from bridge.core.override import EXTENDS
+from bridge.errors import MappingError
+
+FOLDER = "mappings"  # under bridge.state_dir
+HEADER = (
+    "The entities added to this device on the bridge's page (the mapping it extends is "
+    "never edited).\nChecked as any mapping file: docs/mappings.md, Overrides."
+)
+
+
+def override_path(state_dir: Path, device_id: str) -> Path:
+    return state_dir / FOLDER / f"{device_id}.yaml"
+
+
+def entity_added(text: str | None, base: str, key: str, fields: dict[str, Any]) -> str:
+    """The override's text with entity ``key`` added (a new file extending ``base`` when
+    ``text`` is None); ValueError when the text is not an override's mapping."""
+    yaml = _yaml()
+    document = yaml.load(text) if text is not None else None
+    if document is None:
+        document = CommentedMap()
+        document.yaml_set_start_comment(HEADER)
+        document[EXTENDS] = base
+    if not isinstance(document, CommentedMap) or not isinstance(document.get(EXTENDS), str):
+        raise ValueError("the override file has no extends: at its top")
+    entities = document.setdefault("entities", CommentedMap())
+    if not isinstance(entities, CommentedMap):
+        raise ValueError("the override file's entities are not a mapping")
+    entities[key] = CommentedMap(fields)
+    out = io.StringIO()
+    yaml.dump(document, out)
+    return out.getvalue()
+
+
+@dataclass(frozen=True, slots=True)
+class Proposed:
+    """A device's override with one entity more, checked by the mapping loader: ``text``
+    to write at ``path`` (where ``before`` stood; None: no file yet), loading as ``mapping``."""
+
+    path: Path
+    before: str | None
+    text: str
+    mapping: Mapping
+
+
+def propose(
+    device: DeviceConfig, config_dir: Path, state_dir: Path, key: str, fields: dict[str, Any]
+) -> Proposed:
+    """The device's override with entity ``key`` added; MappingError naming the override
+    file with every problem the loader finds (a key the mapping has, a guard, an overlap)."""
+    if device.is_sunspec:
+        raise MappingError(device.id, ["mapping: a SunSpec device's mapping is built, not edited"])
+    base = resolve_mapping_path(device.mapping, config_dir)
+    path = override_path(state_dir, device.id)
+    if device.mapping in builtin_mapping_names():
+        ref = device.mapping
+    elif base.resolve() == path.resolve():
+        ref = ""  # the device names its override already: the file says what it extends
+    else:
+        ref = str(base.resolve())
+    try:
+        before = path.read_text(encoding="utf-8") if path.is_file() else None
+    except OSError as exc:
+        raise MappingError(str(path), [f"cannot read it: {exc.strerror}"]) from None
+    now = (
+        check_mapping_text(before, str(path)).mapping if before is not None else load_mapping(base)
+    )
+    if now is not None and key in now.entities:
+        raise MappingError(str(path), [f"entities.{key}: the mapping has this entity already"])
+    try:
+        text = entity_added(before, ref, key, fields)
+    except (ValueError, YAMLError) as exc:
+        raise MappingError(str(path), [str(exc)]) from None
+    report = check_mapping_text(text, str(path))
+    if report.mapping is None:
+        raise MappingError(str(path), list(report.errors))
+    return Proposed(path, before, text, report.mapping)
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Replace ``path`` by ``text`` at once: a temp file beside it, synced, renamed."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8") as file:
+            file.write(text)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        Path(temp).unlink(missing_ok=True)
+        raise
+
+
+def restore(path: Path, text: str | None) -> None:
+    """Put the override back as it was (``None``: there was none)."""
+    if text is None:
+        path.unlink(missing_ok=True)
+    else:
+        write_atomic(path, text)
+
+
+def _yaml() -> YAML:
+    yaml = YAML(typ="rt")
+    yaml.preserve_quotes = True
+    yaml.width = 100
+    yaml.indent(mapping=2, sequence=4, offset=2)
+    return yaml
