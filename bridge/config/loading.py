@@ -34,7 +34,6 @@ from bridge.config.model import (
     reference_errors,
 )
 from bridge.config.mqtt import MqttConfig
-from bridge.config.user_mapping import override_path
 from bridge.core.counters import counters_of
 from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
 from bridge.core.mapping import resolve_mapping_path as _resolve
@@ -44,6 +43,9 @@ from bridge.errors import ConfigError, MappingError
 from bridge.sunspec import cache as sunspec_cache
 
 DEFAULT_STATE = Path("state")  # ManagementConfig.state_dir's default
+OVERRIDES = (
+    "mappings"  # under bridge.state_dir: each device's override (bridge/config/user_mapping.py)
+)
 MAX_READ_REGISTERS = 125  # a SunSpec walk's read limit unless the device's protocol says less
 
 
@@ -244,3 +246,8 @@ def _sunspec_mapping(
     limit = device.protocol.max_read_registers or MAX_READ_REGISTERS
     cached = sunspec_cache.load(state_dir, device.id, device.sunspec_bases, limit)
     return (cached.mapping if cached is not None else sunspec_cache.pending()), errors
+
+
+def override_path(state_dir: Path, device_id: str) -> Path:
+    """Where a device's override file lives (bridge/config/user_mapping.py)."""
+    return state_dir / OVERRIDES / f"{device_id}.yaml"

@@ -8,23 +8,22 @@ takes it as the device's mapping (``load_device_mapping``); a shipped mapping is
 written. An override that extends another mapping than the device's config names is an
 error naming both, never taken silently.
 
-``entity_added`` edits the file's text with ruamel.yaml's round trip, so a user's
-comments and key order stay; ``write_atomic`` replaces it with a temp file and a rename.
+``entity_added`` edits the file's text as the config file is edited (bridge/config/
+document.py), so a user's comments and key order stay; ``write_atomic`` replaces it with
+a temp file and a rename.
 """
 
 from __future__ import annotations
 
-import io
+import json
 import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ruamel.yaml import YAML
-from ruamel.yaml.comments import CommentedMap
-from ruamel.yaml.error import YAMLError
-
+from bridge.config.document import Document
+from bridge.config.loading import override_path
 from bridge.config.model import DeviceConfig
 from bridge.core.mapping import (
     Mapping,
@@ -34,37 +33,39 @@ from bridge.core.mapping import (
     resolve_mapping_path,
 )
 from bridge.core.override import EXTENDS
+from bridge.core.yaml_source import parse_yaml
 from bridge.errors import MappingError
 
-FOLDER = "mappings"  # under bridge.state_dir
 HEADER = (
     "The entities added to this device on the bridge's page (the mapping it extends is "
     "never edited).\nChecked as any mapping file: docs/mappings.md, Overrides."
 )
 
 
-def override_path(state_dir: Path, device_id: str) -> Path:
-    return state_dir / FOLDER / f"{device_id}.yaml"
-
-
 def entity_added(text: str | None, base: str, key: str, fields: dict[str, Any]) -> str:
     """The override's text with entity ``key`` added (a new file extending ``base`` when
-    ``text`` is None); ValueError when the text is not an override's mapping."""
-    yaml = _yaml()
-    document = yaml.load(text) if text is not None else None
-    if document is None:
-        document = CommentedMap()
-        document.yaml_set_start_comment(HEADER)
-        document[EXTENDS] = base
-    if not isinstance(document, CommentedMap) or not isinstance(document.get(EXTENDS), str):
+    ``text`` is None); ValueError when the text is not an override's mapping. Edited as
+    the config file is (bridge/config/document.py): the user's comments and order kept."""
+    if text is None:
+        header = "".join(f"# {line}\n" for line in HEADER.splitlines())
+        plain = f"{EXTENDS}: {base}\n"
+        quoted = parse_yaml(plain, "the override file") != {EXTENDS: base}
+        text = header + (f"{EXTENDS}: {json.dumps(base)}\n" if quoted else plain)
+    document = Document.parse(text, "the override file")
+    root = document.root
+    if not isinstance(root.get(EXTENDS), str):
         raise ValueError("the override file has no extends: at its top")
-    entities = document.setdefault("entities", CommentedMap())
-    if not isinstance(entities, CommentedMap):
+    expected = parse_yaml(text, "the override file")
+    entities = root.get("entities")
+    if entities is None:
+        root["entities"] = document.node({key: fields})
+        expected["entities"] = {key: fields}
+    elif isinstance(entities, dict):
+        entities[key] = document.node(fields)
+        expected["entities"][key] = fields
+    else:
         raise ValueError("the override file's entities are not a mapping")
-    entities[key] = CommentedMap(fields)
-    out = io.StringIO()
-    yaml.dump(document, out)
-    return out.getvalue()
+    return document.render(expected, "the override file")
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,7 +105,7 @@ def propose(
         raise MappingError(str(path), [f"entities.{key}: the mapping has this entity already"])
     try:
         text = entity_added(before, ref, key, fields)
-    except (ValueError, YAMLError) as exc:
+    except ValueError as exc:
         raise MappingError(str(path), [str(exc)]) from None
     report = check_mapping_text(text, str(path))
     if report.mapping is None:
@@ -133,11 +134,3 @@ def restore(path: Path, text: str | None) -> None:
         path.unlink(missing_ok=True)
     else:
         write_atomic(path, text)
-
-
-def _yaml() -> YAML:
-    yaml = YAML(typ="rt")
-    yaml.preserve_quotes = True
-    yaml.width = 100
-    yaml.indent(mapping=2, sequence=4, offset=2)
-    return yaml

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from bridge.config import MqttConfig
-from bridge.config.user_mapping import override_path
+from bridge.config.loading import override_path
 from bridge.core.entity import Table
 from bridge.core.mapping import builtin_mapping_path
 from bridge.mqtt import MqttClient
