@@ -76,6 +76,7 @@ class Records:
         self.violations: list[Found] = []
         self.log_offsets: dict[Path, int] = {}
         self.health: dict[str, object] = {}
+        self.process: list[tuple[float, int, int]] = []  # health's (at, tasks, outbox)
         self.next_sample = 0.0
         self._seen: set[tuple[str, float, str]] = set()
         self._writes_read = {"tcp": 0, "rs485": 0}
@@ -149,6 +150,9 @@ class Records:
 
     def _health(self, at: float, health: dict[str, object]) -> None:
         self.health = health
+        process = health.get("process")
+        if isinstance(process, dict):
+            self.process.append((at, int(process["tasks"]), int(process["outbox"])))
         devices = health.get("devices", {})
         assert isinstance(devices, dict)
         for device, figures in devices.items():
@@ -265,5 +269,19 @@ class Records:
             f"{max(f for _, f in fds):.0f}, slope {slope_per_hour(fds):+.1f}/h "
             f"(after the first fifth; {len(self.samples)} samples)",
             f"outbox: bounded by its deque; messages it dropped (last health): {dropped}",
-            "asyncio tasks: not in the bridge's health report, so not measured",
+            *self._process_lines(),
+        ]
+
+    def _process_lines(self) -> list[str]:
+        """The asyncio tasks and the outbox as the health reports said them."""
+        settled = self.process[len(self.process) // 5 :]
+        if not settled:
+            return ["asyncio tasks and outbox: no health report with them"]
+        tasks = [(at, float(t)) for at, t, _ in settled]
+        outbox = [(at, float(o)) for at, _, o in settled]
+        return [
+            f"asyncio tasks {min(t for _, t in tasks):.0f}-{max(t for _, t in tasks):.0f}, "
+            f"slope {slope_per_hour(tasks):+.1f}/h; outbox {min(o for _, o in outbox):.0f}-"
+            f"{max(o for _, o in outbox):.0f} messages, slope {slope_per_hour(outbox):+.1f}/h "
+            f"(health reports after the first fifth: {len(settled)})"
         ]

@@ -40,6 +40,9 @@ The wiring: the parts call back into the bridge, and every callback is named in
   a ``mapping: sunspec`` device's mapping, built or rebuilt by ``management.sunspec``
   (bridge/sunspec_devices.py, run with the engine) -> ``Management.swap_mapping`` -> the
   same ``_reloaded``;
+- a new config (the web page after it wrote the file, SIGHUP after it read it again):
+  ``apply_config`` -> bridge/reconfigure.py, which starts, stops and restarts through the
+  engine, the dispatcher (``between_commands``) and ``state.removed``/``state.reloaded``;
 - the MQTT side: ``run_with_reconnect(session=_session, on_state=_mqtt_is)``; a session's
   publishing tasks are ``state.run``, ``state.refresh``, ``state.home_assistant_returns``
   and ``_health_reports``.
@@ -58,7 +61,7 @@ from typing import TYPE_CHECKING, Any
 
 from bridge import __version__
 from bridge.carry_over import carry_over
-from bridge.config import LoadedConfig, MetricsConfig
+from bridge.config import LoadedConfig, MetricsConfig, load_config
 from bridge.core.commands import check_size, error_document
 from bridge.core.discovery import (
     Origin,
@@ -71,7 +74,7 @@ from bridge.core.state import compact
 from bridge.core.topics import Topics
 from bridge.discovery_publisher import DiscoveryPublisher
 from bridge.dispatcher import RETAINED, Dispatcher
-from bridge.errors import ValueRejectedError, first_of
+from bridge.errors import ConfigError, ValueRejectedError, first_of
 from bridge.management import Management
 from bridge.modbus.engine import Engine
 from bridge.modbus.poller import DeviceUpdate
@@ -83,6 +86,7 @@ from bridge.mqtt import (
     run_with_reconnect,
 )
 from bridge.mqtt.reconnect import STANDBY_RETRY
+from bridge.reconfigure import apply_config
 from bridge.standby import check_alone
 from bridge.state_publisher import StatePublisher
 from bridge.subscriptions import Subscriptions, Wanted
@@ -315,6 +319,7 @@ class Bridge:
                 "coalesced": counters.coalesced,
                 "dropped": self.state.dropped,
             }
+            report["process"] = {"tasks": len(asyncio.all_tasks()), "outbox": self.state.queued}
             if self.gateway is not None:
                 report["gateway"] = self.gateway.health()
             await client.publish(self.topics.bridge_health, compact(report), retain=True)
@@ -386,16 +391,32 @@ class Bridge:
                 work.close()
             log.debug("the bridge is stopping: work not started")
 
+    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]:
+        """Apply a new config while running: only what changed is started, stopped or
+        restarted; what needs a restart is refused whole (bridge/reconfigure.py)."""
+        return await apply_config(self, new)
+
     def hangup(self) -> None:
-        """SIGHUP (``systemctl reload``, a closed terminal): read the mapping files again, as
-        ``bridge/request/mapping/reload`` with no devices does, and go on running; the
-        config file itself is read at start only."""
-        log.info(
-            "SIGHUP: reading the mapping files again (the config file is read at start "
-            "only: restart the bridge to apply a change to it)"
-        )
+        """SIGHUP (``systemctl reload``, a closed terminal): read the config file again and
+        apply what changed (``apply_config``; a file that does not load, or a change that
+        needs a restart, is logged and changes nothing), then the mapping files, as
+        ``bridge/request/mapping/reload`` with no devices does, and go on running."""
+        log.info("SIGHUP: reading the config file and the mapping files again")
         if self._group is not None:
-            self._spawn(self._reload_mappings())
+            self._spawn(self._reload_all())
+
+    async def _reload_all(self) -> None:
+        path = self.loaded.path
+        if path.is_file():  # not the demo's config, built in memory
+            try:
+                new = await asyncio.to_thread(load_config, path)
+            except ConfigError as exc:
+                log.error("SIGHUP: the config file is not applied, nothing changed: %s", exc)
+            else:
+                answer = await self.apply_config(new)
+                if answer["status"] == "ok":
+                    log.info("SIGHUP: config changes: %s", answer["description"])
+        await self._reload_mappings()
 
     async def _reload_mappings(self) -> None:
         answer = json.loads(await self.management.handle("mapping/reload", b"{}"))

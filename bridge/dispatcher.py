@@ -25,7 +25,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator, Callable, Coroutine
+from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -162,7 +163,10 @@ class Dispatcher:
             self._fail(command, "no such device")
             return None
         async with self._locks.setdefault(device_id, asyncio.Lock()):
-            poller = self.engine.devices[device_id]  # now: a mapping reload may have replaced it
+            poller = self.engine.devices.get(device_id)  # now: a reload may have replaced it
+            if poller is None:  # or removed it (a config applied live: bridge/reconfigure.py)
+                self._fail(command, "no such device: it was removed from the config")
+                return None
             if command.expired(time.monotonic()):
                 poller.writes.expired += 1
                 self._fail(command, "expired: not executed within the command expiry")
@@ -179,6 +183,14 @@ class Dispatcher:
             except BridgeError as exc:
                 self._fail(command, str(exc))
             return poller
+
+    @asynccontextmanager
+    async def between_commands(self, device_id: str) -> AsyncIterator[None]:
+        """Hold the device's commands: the one running (a write of several registers)
+        ends first, the ones after wait (a config applied live stops or restarts the
+        device meanwhile: bridge/reconfigure.py)."""
+        async with self._locks.setdefault(device_id, asyncio.Lock()):
+            yield
 
     async def write_for(
         self, device_id: str, items: dict[str, object], deadline: float

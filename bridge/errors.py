@@ -3,7 +3,14 @@
     BridgeError                 base of everything the bridge raises on purpose
     ├── InputError              a file the user wrote is invalid (config or mapping)
     │   ├── ConfigError         the config file; ``issues`` lists ``path: message`` rows
-    │   └── MappingError        a mapping file; rows name the entity key and the field
+    │   ├── MappingError        a mapping file; rows name the entity key and the field
+    │   └── ConfigEditError     an edit of the config file is refused (bridge/config/store.py);
+    │       │                   ``field`` names where (``devices.pump.unit``); nothing written
+    │       ├── ConfigConflictError  the file changed on disk since it was read; ``diff``
+    │       │                   shows how (secrets hidden)
+    │       ├── ConfigReadOnlyError  the config is not a file the bridge may write (the
+    │       │                   add-on's options, a config given as data)
+    │       └── ConfigWriteError the file or its backup could not be written (disk, rights)
     ├── CodecError              a value cannot be decoded or encoded
     │   ├── MissingDataError    a register the value needs has not been read yet
     │   └── ValueRejectedError  a command value is refused (type, range, enum label,
@@ -73,6 +80,34 @@ class ConfigError(InputError):
 
 class MappingError(InputError):
     """A mapping file is invalid."""
+
+
+class ConfigEditError(InputError):
+    """An edit of the config file is refused and nothing is written: ``field`` names where
+    (``devices.pump.unit``, empty when it is the whole edit), ``message`` says why, and
+    ``issues`` holds every ``field: message`` row."""
+
+    def __init__(self, message: str, field: str = "", issues: Sequence[str] = ()) -> None:
+        self.message = message
+        self.field = field
+        super().__init__("config edit", issues or [f"{field}: {message}" if field else message])
+
+
+class ConfigConflictError(ConfigEditError):
+    """The config file changed on disk since it was read: ``diff`` (unified, secrets
+    hidden) goes from what was read to what is on disk now; nothing is written."""
+
+    def __init__(self, source: str, diff: str) -> None:
+        self.diff = diff
+        super().__init__(f"{source} changed on disk since it was read; reload it and redo the edit")
+
+
+class ConfigReadOnlyError(ConfigEditError):
+    """The config is not a file the bridge may write (the add-on's options, data)."""
+
+
+class ConfigWriteError(ConfigEditError):
+    """The config file or its backup could not be written; the file is as it was."""
 
 
 class CodecError(BridgeError):

@@ -102,7 +102,7 @@ class Management:
         self._on_reload = on_reload
         self._mqtt_state = mqtt_state
         self.instance = instance  # this run, named in info and health checks
-        self._reloading = asyncio.Lock()
+        self.reloading = asyncio.Lock()  # one reload at a time (and one config applied live)
         # the mapping: sunspec devices' walks, run beside the engine's polls
         self.sunspec = SunSpecDevices(loaded, engine, swap=self.swap_mapping)
         engine.companions.append(self.sunspec.run)
@@ -298,7 +298,7 @@ class Management:
             settings[device_id] = settings[device_id].model_copy(
                 update={"mapping": self._switch_to(request.mapping)}
             )
-        async with self._reloading:
+        async with self.reloading:
             # all or nothing: errors change nothing; files are read off the event loop
             fresh = await asyncio.to_thread(self._load_mappings, settings)
             # like with like: the file as loaded now against the file as loaded before (a
@@ -318,7 +318,7 @@ class Management:
     async def swap_mapping(self, device_id: str, mapping: Mapping) -> None:
         """Poll a device with another mapping from now on, as a reload does (its poller
         afresh, discovery and state again): a SunSpec device's built mapping."""
-        async with self._reloading:
+        async with self.reloading:
             await self._replace(device_id, mapping, self.engine.device(device_id).device)
             await self._on_reload([device_id])
 
@@ -355,7 +355,10 @@ class Management:
                 loaded[device_id] = self.loaded.mappings[device_id]
                 continue
             bus = self.engine.schedulers[device.bus].transport.bus
-            mapping, problems = load_device_mapping(device, bus, self.loaded.path.parent)
+            base = self.loaded.path.parent
+            mapping, problems = load_device_mapping(
+                device, bus, base, state_dir=base / self.settings.state_dir
+            )
             errors += problems
             if mapping is not None:
                 loaded[device_id] = mapping
@@ -426,9 +429,10 @@ def reach_at(loaded: LoadedConfig, engine: Engine, bus_id: str, unit: int) -> Re
         poller = engine.devices.get(configured.id)
         if poller is not None:  # its guard holds what earlier mappings guarded too
             device, guard = poller.device, poller.guard
-        else:
+        else:  # and what it guarded while it was polled in this run, if it was
             device = configured
             guard = _guard_of(device, loaded.mappings[device.id])
+            guard |= engine.retired.get(device.id, guard)
         neighbours.append(Neighbour(device.id, device.unit, guard, device.allow_dangerous_writes))
     return reach_of(bus.id, unit, neighbours, tcp=isinstance(bus, TcpBus))
 

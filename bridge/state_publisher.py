@@ -11,6 +11,11 @@ list when an availability changed, then the outbox. A command's read-back goes t
 way (``again``). Every (re)connect, ``refresh`` and Home Assistant's ``online``
 (``home_assistant_online``) publish everything at once instead (``everything``).
 
+A device no longer polled (removed or disabled by a config applied live: bridge/
+reconfigure.py) has its retained topics emptied at the next flush, discovery configs first
+(``removed``), as the demo empties everything at its stop; a device polled again before
+that keeps them (``restored``).
+
 Alarm events (bridge/core/alarm_events.py) are found where the change comes in, not when
 it is sent: each raise and clear a poll sees is queued once on ``<base>/<device>/event``
 (kept in the outbox while the broker is away), against the alarms last said active, which
@@ -78,6 +83,12 @@ class StatePublisher:
         self._ha_online = asyncio.Event()  # Home Assistant said online: republish soon
         self._alarms: dict[str, frozenset[str]] = {}  # the alarms last said active
         self._carried = False  # the first session read what a run before left retained
+        self._clearing: dict[str, list[str]] = {}  # device no longer polled -> its topics
+
+    @property
+    def queued(self) -> int:
+        """Messages waiting in the outbox (bridge/health's ``process.outbox``)."""
+        return len(self._outbox)
 
     # --- what the bridge asks for ---------------------------------------------------
 
@@ -157,6 +168,20 @@ class StatePublisher:
         self._republish = True
         self._wake.set()
 
+    def removed(self, device_id: str, topics: list[str]) -> None:
+        """A device is no longer polled: empty ``topics`` (its discovery configs first) and
+        every other retained topic of the device the session published, at the next flush;
+        forget what was said of it."""
+        self._dirty.pop(device_id, None)
+        self._availability.pop(device_id, None)
+        self._alarms.pop(device_id, None)
+        self._clearing[device_id] = topics
+        self._wake.set()
+
+    def restored(self, device_id: str) -> None:
+        """A device is polled again before its topics were emptied: they stay."""
+        self._clearing.pop(device_id, None)
+
     def home_assistant_online(self) -> None:
         """Home Assistant (re)started: discovery and state again, soon."""
         self._ha_online.set()
@@ -165,6 +190,8 @@ class StatePublisher:
 
     async def run(self, client: MqttClient) -> None:
         """Publish what changed, whenever something did."""
+        if self._clearing:  # left by a session that ended before it emptied them
+            self._wake.set()
         while True:
             await self._wake.wait()
             self._wake.clear()
@@ -194,7 +221,10 @@ class StatePublisher:
     # --- publishing -----------------------------------------------------------------
 
     async def flush(self, client: MqttClient) -> None:
-        """Everything due now: info, a reload's republish, dirty devices, the outbox."""
+        """Everything due now: the topics of devices no longer polled, info, a reload's
+        republish, dirty devices, the outbox."""
+        if self._clearing:
+            await self._clear_removed(client)
         if self._info_due:
             self._info_due = False
             await self._publish_info(client)
@@ -208,7 +238,9 @@ class StatePublisher:
         burst: list[Outgoing] = []
         devices_changed = False
         for device_id, keys in dirty.items():
-            poller = self.engine.devices[device_id]
+            poller = self.engine.devices.get(device_id)
+            if poller is None:  # a read back after its delay, of a device removed since
+                continue
             due = self.discovery.due(poller, keys)  # first: the payload admits the values
             if due and await self.discovery.publish(client, only=device_id):
                 self._spawn(self._state_again(device_id))
@@ -222,6 +254,23 @@ class StatePublisher:
                 await client.publish(message.topic, message.payload, retain=message.retain)
             except MqttPublishError as exc:
                 log.warning("%s", exc)
+
+    async def _clear_removed(self, client: MqttClient) -> None:
+        """Empty the retained topics of the devices no longer polled: the ones listed, then
+        the others this session published under the device's topic; acknowledged together."""
+        clearing = dict(self._clearing)
+        prefix = self.topics.discovery_prefix + "/"
+        topics: list[str] = []
+        for device_id, listed in clearing.items():
+            own = self.topics.device(device_id)
+            under = {t for t in client.retained_topics if t == own or t.startswith(own + "/")}
+            topics += [t for t in listed if t not in under] + sorted(under)
+        topics = sorted(dict.fromkeys(topics), key=lambda t: not t.startswith(prefix))
+        await client.publish_many((topic, "", True) for topic in topics)
+        for device_id, listed in clearing.items():
+            if self._clearing.get(device_id) is listed:  # not restored meanwhile
+                del self._clearing[device_id]
+        log.info("emptied %d retained topics of %s", len(topics), ", ".join(clearing))
 
     async def everything(self, client: MqttClient, *, with_info: bool = False) -> None:
         """Every device's state and availability, the devices list (and ``bridge/info``),

@@ -16,9 +16,13 @@ runs) does one of two things:
   the walk of a dead unit delays no other device more than one poll of it would.
 
 Then it watches the device: one that was offline and answers again (a firmware update
-reboots it) has its chain walked again, as after a start, and rebuilt if it changed.
+reboots it) has its chain walked again, as after a start, and rebuilt if it changed; at
+most once every ``REWALK_GAP`` (a device that keeps dropping off a noisy line is checked
+once the gap has passed, not at every return).
 
-``rewalk(device_id)`` walks and builds now (``mapping/reload`` with ``rewalk``) and
+``start(device_id)`` and ``stop(device_id)`` begin and end that for one device while the
+engine runs (a config applied live: bridge/reconfigure.py). ``rewalk(device_id)`` walks
+and builds now (``mapping/reload`` with ``rewalk``) and
 swaps the mapping in when it differs. A cache that cannot be written is logged; the
 device runs with the mapping built.
 """
@@ -26,7 +30,9 @@ device runs with the mapping built.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import math
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
@@ -51,6 +57,7 @@ Swap = Callable[[str, Mapping], Awaitable[None]]
 NOT_SUNSPEC_RETRY = 600.0  # seconds before a unit without the marker is asked again
 FIRST_POLL_WAIT = 30.0  # seconds a cached device's chain check waits for its first poll
 WATCH = 1.0  # seconds between two looks at a device's availability (rebooted: walk again)
+REWALK_GAP = 600.0  # seconds at least between two checks of a chain after the device's returns
 BACKOFF_INITIAL, BACKOFF_MAX = 5.0, 300.0  # a failed walk, as an unreachable device
 
 
@@ -64,6 +71,8 @@ class SunSpecDevices:
         self._swap = swap
         self._locks = {device_id: asyncio.Lock() for device_id in self.ids}
         self.walks = 0  # chain walks done, a check's and a build's (the tests count them)
+        self._group: asyncio.TaskGroup | None = None
+        self._tasks: dict[str, asyncio.Task[None]] = {}
 
     @property
     def ids(self) -> list[str]:
@@ -72,9 +81,31 @@ class SunSpecDevices:
 
     async def run(self) -> None:
         """Keep every SunSpec device's mapping built and current (until cancelled)."""
-        async with asyncio.TaskGroup() as group:
-            for device_id in self.ids:
-                group.create_task(self._keep(device_id), name=f"sunspec:{device_id}")
+        try:
+            async with asyncio.TaskGroup() as group:
+                self._group = group
+                for device_id in self.ids:
+                    self.start(device_id)
+                await asyncio.get_running_loop().create_future()  # open for ``start``
+        finally:
+            self._group = None
+            self._tasks.clear()
+
+    def start(self, device_id: str) -> None:
+        """Keep a device's mapping built and current from now on (a SunSpec device added,
+        enabled or restarted by a config applied live: bridge/reconfigure.py)."""
+        if self._group is not None:
+            task = self._group.create_task(self._keep(device_id), name=f"sunspec:{device_id}")
+            self._tasks[device_id] = task
+
+    async def stop(self, device_id: str) -> None:
+        """No more walks of a device (before it is stopped or restarted); a walk in flight
+        is cut short (it only reads)."""
+        task = self._tasks.pop(device_id, None)
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
 
     async def rewalk(self, device_id: str) -> bool:
         """Walk and build now; True if the mapping changed (and was swapped in)."""
@@ -113,13 +144,16 @@ class SunSpecDevices:
     async def _after_reboots(self, device_id: str) -> None:
         """Walk the chain again whenever the device answers after being offline (a firmware
         update reboots it); rebuilt if it changed. Ends when it is switched to a file."""
-        was_offline = False
+        was_offline = due = False
+        checked = -math.inf
         while self.engine.device(device_id).device.is_sunspec:
             poller = self.engine.device(device_id)
             if poller.health.online is False:
                 was_offline = True
             elif poller.health.online and was_offline:
-                was_offline = False
+                was_offline, due = False, True
+            if due and poller.health.online and time.monotonic() >= checked + REWALK_GAP:
+                due, checked = False, time.monotonic()
                 log.info(
                     "%s: answers again; checking its SunSpec model chain (a firmware update "
                     "changes it)",

@@ -15,27 +15,30 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import socket
 import sys
 import tempfile
-from collections.abc import AsyncIterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
 from bridge.app import Bridge
-from bridge.cli.demo_broker import find_mosquitto, private_mosquitto
+from bridge.cli.demo_broker import (
+    BrokerChoice,
+    DemoBrokerError,
+    broker_advice,
+    broker_how,
+    choose_broker,
+    free_port,
+)
 from bridge.cli.demo_control import FAULT_REQUEST, fault_request
 from bridge.cli.demo_site import LOOPBACK, SEEDS, SERIAL_BUS, SITES, SeedDevice, Site, site_data
 from bridge.cli.demo_view import DemoView, mosquitto_options, render_plain, render_table
 from bridge.cli.lifecycle import add_logging_arguments, configure_logging, until_stopped
-from bridge.config import LoadedConfig, MqttConfig, load_config_data
+from bridge.config import LoadedConfig, load_config_data
 from bridge.core.mapping import builtin_mapping_path, load_mapping
 from bridge.errors import BridgeError, ConfigError, InputError, first_of
 from bridge.modbus.null_modem import null_modem
 from bridge.modbus.simulator import SimulatedUnit, Simulator, SunSpecUnit
 from bridge.mqtt import MqttConnectError
-from bridge.mqtt.broker import PROTOCOL, embedded_broker
 from bridge.sunspec.image import load_image
 
 DESCRIPTION = """\
@@ -55,23 +58,7 @@ DEFAULT_MODBUS_PORT = 5020
 DEFAULT_WEB_PORT = 8099
 DEFAULT_GATEWAY_PORT = 5502
 SUNSPEC_IMAGES = Path(__file__).resolve().parent.parent / "sunspec"  # the demo's device images
-__all__ = ["SEEDS", "SeedDevice", "add_parser", "demo_config", "site_data"]
-
-
-@dataclass(frozen=True, slots=True)
-class BrokerChoice:
-    url: str
-    how: str  # "given", "local", PRIVATE or EMBEDDED
-    protocol: str = "5"
-
-    @property
-    def own(self) -> bool:
-        """The demo started it: anonymous, on loopback, stopped with the demo."""
-        return self.how in (PRIVATE, EMBEDDED)
-
-
-PRIVATE = "private mosquitto"
-EMBEDDED = "embedded"
+__all__ = ["SEEDS", "BrokerChoice", "SeedDevice", "add_parser", "demo_config", "site_data"]
 
 
 def add_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -199,7 +186,9 @@ async def demo(args: argparse.Namespace, out: TextIO) -> None:
             for bus, simulator in simulators.items():
                 if bus != SERIAL_BUS:
                     where[bus] = f"{LOOPBACK}:{simulator.port}"
-            async with _broker(args.mqtt_url, args.local_broker, args.embedded_broker) as broker:
+            async with choose_broker(
+                args.mqtt_url, args.local_broker, args.embedded_broker
+            ) as broker:
                 args.state_dir = state
                 await _run(site, simulators, where, broker, args=args, out=out)
 
@@ -226,7 +215,7 @@ def _serve(
             device_end, where[bus] = cables.enter_context(null_modem())
             group.create_task(simulator.serve_serial(device_end), name=f"simulator {bus}")
         else:
-            port = _free_port(modbus_port)
+            port = free_port(modbus_port)
             group.create_task(simulator.serve_tcp(LOOPBACK, port), name=f"simulator {bus}")
     return where
 
@@ -241,14 +230,14 @@ async def _run(
     out: TextIO,
 ) -> None:
     """The bridge on the started simulators, and the view, until cancelled."""
-    web_port = _free_port(args.web_port)
-    gateway_port = _free_port(args.gateway_port) if site.serial else 0
+    web_port = free_port(args.web_port)
+    gateway_port = free_port(args.gateway_port) if site.serial else 0
     loaded = demo_config(broker, where, args, web_port, gateway_port)
     bridge = Bridge(loaded, remove_on_stop=not args.keep, must_connect=True)
     units = {d.id: (simulators[d.bus], d.unit) for d in site.devices}
     bridge.extra_requests[FAULT_REQUEST] = fault_request(units)
     mqtt = loaded.config.mqtt
-    view = DemoView(bridge, broker_url=mqtt.broker_url, broker_how=_how(broker, mqtt))
+    view = DemoView(bridge, broker_url=mqtt.broker_url, broker_how=broker_how(broker, mqtt))
     view.modbus = _modbus_line(site, where, gateway_port)
     command = site.controls[0]
     view.command = f"{args.base_topic}/{command.device}/{command.key}/set"
@@ -277,7 +266,7 @@ async def _run(
             await show(view, out)
     except* MqttConnectError as failed:
         failure = first_of(failed, MqttConnectError) or failed
-        raise DemoBrokerError(_advice(failure, broker)) from None
+        raise DemoBrokerError(broker_advice(failure, broker)) from None
 
 
 def _modbus_line(site: Site, where: dict[str, str], gateway_port: int) -> str:
@@ -291,26 +280,6 @@ def _modbus_line(site: Site, where: dict[str, str], gateway_port: int) -> str:
     if gateway_port:
         parts.append(f"gateway Modbus TCP {LOOPBACK}:{gateway_port}")
     return ", ".join(parts)
-
-
-class DemoBrokerError(BridgeError):
-    """The broker the demo chose cannot be used (unreachable, login refused)."""
-
-
-def _how(broker: BrokerChoice, mqtt: MqttConfig) -> str:
-    """``local``, ``given, user bridge``: how the broker was chosen, and the login."""
-    return broker.how + (f", user {mqtt.username}" if mqtt.username else "")
-
-
-def _advice(failure: Exception, broker: BrokerChoice) -> str:
-    """Why the demo cannot use the broker, and what to do, said once."""
-    if isinstance(failure, MqttConnectError) and failure.refused:  # the login
-        hint = "log in with --username and --password-file or --password-env"
-    elif broker.how == "given":
-        hint = "check --mqtt-url, or leave it out to use a local or an embedded broker"
-    else:
-        hint = "name another broker with --mqtt-url or --local-broker HOST:PORT"
-    return f"{failure}\n  {hint}"
 
 
 def demo_config(
@@ -375,51 +344,6 @@ def _site_config(  # noqa: PLR0917 - the demo's own
     if state_dir is not None:
         data["bridge"]["state_dir"] = state_dir
     return load_config_data(data, Path(f"demo-{site.name}.yaml"))
-
-
-@contextlib.asynccontextmanager
-async def _broker(url: str | None, local: str, embedded: bool) -> AsyncIterator[BrokerChoice]:
-    """The broker given, else a local one that answers, else a private mosquitto, else an
-    embedded one (both on ``local``'s port if it is free)."""
-    if url is not None:
-        yield BrokerChoice(url, "given")
-        return
-    host, _, port_text = local.rpartition(":")
-    if await _answers(host, int(port_text)):
-        yield BrokerChoice(f"mqtt://{host}:{port_text}", "local")
-        return
-    port = _free_port(int(port_text))
-    mosquitto = None if embedded else find_mosquitto()
-    if mosquitto is not None:
-        async with private_mosquitto(mosquitto, LOOPBACK, port) as private:
-            yield BrokerChoice(private, PRIVATE)
-        return
-    async with embedded_broker(LOOPBACK, port) as inside:
-        yield BrokerChoice(inside, EMBEDDED, PROTOCOL)
-
-
-async def _answers(host: str, port: int) -> bool:
-    """True when something accepts a TCP connection on ``host:port`` within a second."""
-    try:
-        async with asyncio.timeout(1.0):
-            _, writer = await asyncio.open_connection(host, port)
-    except (OSError, TimeoutError):
-        return False
-    writer.close()
-    with contextlib.suppress(OSError):
-        await writer.wait_closed()
-    return True
-
-
-def _free_port(preferred: int) -> int:
-    """``preferred`` if it can be bound on loopback, else a free port the OS picks."""
-    with socket.socket() as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((LOOPBACK, preferred))
-        except OSError:
-            probe.bind((LOOPBACK, 0))
-        return int(probe.getsockname()[1])
 
 
 async def _show_live(view: DemoView, out: TextIO) -> None:

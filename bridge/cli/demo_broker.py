@@ -1,4 +1,8 @@
-"""The demo's own broker when none answers: a private ``mosquitto``, else the embedded one.
+"""The demo's broker: the one given, a local one that answers, else its own (a private
+``mosquitto``, else the embedded one).
+
+``choose_broker(url, local, embedded)`` picks it (``BrokerChoice``: its URL and how it was
+chosen); ``broker_advice`` says once what to do when it cannot be used.
 
 ``private_mosquitto(binary, host, port)`` runs the machine's ``mosquitto`` with a config of
 its own in a temporary folder (a loopback listener, anonymous, no persistence), waits
@@ -14,11 +18,17 @@ import contextlib
 import getpass
 import os
 import shutil
+import socket
 import tempfile
 from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from pathlib import Path
 
-from bridge.mqtt.broker import BrokerUnavailableError
+from bridge.cli.demo_site import LOOPBACK
+from bridge.config import MqttConfig
+from bridge.errors import BridgeError
+from bridge.mqtt import MqttConnectError
+from bridge.mqtt.broker import PROTOCOL, BrokerUnavailableError, embedded_broker
 
 SBIN = ("/usr/sbin", "/usr/local/sbin", "/opt/homebrew/sbin")
 READY_WITHIN = 5.0  # seconds for mosquitto to listen
@@ -100,3 +110,84 @@ async def _stop(process: asyncio.subprocess.Process) -> None:
     except TimeoutError:
         process.kill()
         await process.wait()
+
+
+@dataclass(frozen=True, slots=True)
+class BrokerChoice:
+    url: str
+    how: str  # "given", "local", PRIVATE or EMBEDDED
+    protocol: str = "5"
+
+    @property
+    def own(self) -> bool:
+        """The demo started it: anonymous, on loopback, stopped with the demo."""
+        return self.how in (PRIVATE, EMBEDDED)
+
+
+PRIVATE = "private mosquitto"
+EMBEDDED = "embedded"
+
+
+class DemoBrokerError(BridgeError):
+    """The broker the demo chose cannot be used (unreachable, login refused)."""
+
+
+def broker_how(broker: BrokerChoice, mqtt: MqttConfig) -> str:
+    """``local``, ``given, user bridge``: how the broker was chosen, and the login."""
+    return broker.how + (f", user {mqtt.username}" if mqtt.username else "")
+
+
+def broker_advice(failure: Exception, broker: BrokerChoice) -> str:
+    """Why the demo cannot use the broker, and what to do, said once."""
+    if isinstance(failure, MqttConnectError) and failure.refused:  # the login
+        hint = "log in with --username and --password-file or --password-env"
+    elif broker.how == "given":
+        hint = "check --mqtt-url, or leave it out to use a local or an embedded broker"
+    else:
+        hint = "name another broker with --mqtt-url or --local-broker HOST:PORT"
+    return f"{failure}\n  {hint}"
+
+
+@contextlib.asynccontextmanager
+async def choose_broker(url: str | None, local: str, embedded: bool) -> AsyncIterator[BrokerChoice]:
+    """The broker given, else a local one that answers, else a private mosquitto, else an
+    embedded one (both on ``local``'s port if it is free)."""
+    if url is not None:
+        yield BrokerChoice(url, "given")
+        return
+    host, _, port_text = local.rpartition(":")
+    if await answers(host, int(port_text)):
+        yield BrokerChoice(f"mqtt://{host}:{port_text}", "local")
+        return
+    port = free_port(int(port_text))
+    mosquitto = None if embedded else find_mosquitto()
+    if mosquitto is not None:
+        async with private_mosquitto(mosquitto, LOOPBACK, port) as private:
+            yield BrokerChoice(private, PRIVATE)
+        return
+    async with embedded_broker(LOOPBACK, port) as inside:
+        yield BrokerChoice(inside, EMBEDDED, PROTOCOL)
+
+
+async def answers(host: str, port: int) -> bool:
+    """True when something accepts a TCP connection on ``host:port`` within a second."""
+    try:
+        async with asyncio.timeout(1.0):
+            _, writer = await asyncio.open_connection(host, port)
+    except (OSError, TimeoutError):
+        return False
+    writer.close()
+    with contextlib.suppress(OSError):
+        await writer.wait_closed()
+    return True
+
+
+def free_port(preferred: int) -> int:
+    """``preferred`` if it can be bound on loopback, else a free port the OS picks."""
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((LOOPBACK, preferred))
+        except OSError:
+            probe.bind((LOOPBACK, 0))
+        return int(probe.getsockname()[1])

@@ -6,9 +6,18 @@
     checks.py   checks beyond the model: files, variables, topic sizes; the error rows
     loading.py  load_config(): the file, its mappings, every problem reported at once
 
-Each imports only the ones above it in this list (an import-linter contract in
-pyproject.toml): the checks read the model, the model never reads the checks. The names
-below are the package's public face; import them from ``bridge.config``.
+The file as the web page edits it (import these from their modules: ruamel.yaml loads
+only for an edit):
+
+    lines.py      lines of text compared (Myers) and merged three ways
+    document.py   the YAML that keeps the user's comments and layout (ruamel.yaml)
+    edits.py      the changes (AddDevice, EditDevice, RemoveDevice, AddBus), bounded
+    redaction.py  config data and text with secrets hidden
+    store.py      ConfigStore: one change validated as ``check`` does, written atomically
+
+Each imports only the ones listed before it (an import-linter contract in pyproject.toml):
+the checks read the model, the model never reads the checks. The names below are the
+package's public face; import them from ``bridge.config``.
 """
 
 from bridge.config.field import FilePath, is_register_number, secret_of

@@ -40,7 +40,7 @@ from bridge.core.codec import (
     scale_value,
 )
 from bridge.core.entity import MAX_EXPONENT, Component, Entity, PollClass, StateLink
-from bridge.core.hass import BINARY_SENSOR_CLASSES, BUTTON_CLASSES, SWITCH_CLASSES
+from bridge.core.hass import BUTTON_CLASSES, SWITCH_CLASSES, binary_sensor_class
 from bridge.core.mapping import Point
 from bridge.core.topics import Topics
 from bridge.errors import MissingDataError
@@ -322,9 +322,7 @@ def unit_of(key: str, entity: Entity, context: ComponentContext) -> str | None:
 
 def _binary_sensor(key: str, entity: Entity, context: ComponentContext) -> Config:
     config = _state(key, context) | {"payload_on": STATE_TRUE, "payload_off": STATE_FALSE}
-    device_class = entity.ha.device_class
-    if device_class not in BINARY_SENSOR_CLASSES:  # a switch's class, shown read-only
-        device_class = "problem" if entity.alarm else None
+    device_class = binary_sensor_class(entity)
     if device_class is not None:
         config["device_class"] = device_class
     return config

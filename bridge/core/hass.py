@@ -98,6 +98,39 @@ BINARY_SENSOR_CLASSES = frozenset(
         "window",
     }
 )
+# What Home Assistant shows (in English) for a binary sensor that is off and on, by its
+# device class (homeassistant/components/binary_sensor/strings.json); None: no class.
+BINARY_SENSOR_STATES: dict[str | None, tuple[str, str]] = {
+    None: ("Off", "On"),
+    "battery": ("Normal", "Low"),
+    "battery_charging": ("Not charging", "Charging"),
+    "carbon_monoxide": ("Clear", "Detected"),
+    "cold": ("Normal", "Cold"),
+    "connectivity": ("Disconnected", "Connected"),
+    "door": ("Closed", "Open"),
+    "garage_door": ("Closed", "Open"),
+    "gas": ("Clear", "Detected"),
+    "heat": ("Normal", "Hot"),
+    "light": ("No light", "Light detected"),
+    "lock": ("Locked", "Unlocked"),
+    "moisture": ("Dry", "Wet"),
+    "motion": ("Clear", "Detected"),
+    "moving": ("Not moving", "Moving"),
+    "occupancy": ("Clear", "Detected"),
+    "opening": ("Closed", "Open"),
+    "plug": ("Unplugged", "Plugged in"),
+    "power": ("Off", "On"),
+    "presence": ("Away", "Home"),
+    "problem": ("OK", "Problem"),
+    "running": ("Not running", "Running"),
+    "safety": ("Safe", "Unsafe"),
+    "smoke": ("Clear", "Detected"),
+    "sound": ("Clear", "Detected"),
+    "tamper": ("Clear", "Tampering detected"),
+    "update": ("Up-to-date", "Update available"),
+    "vibration": ("Clear", "Detected"),
+    "window": ("Closed", "Open"),
+}
 SWITCH_CLASSES = frozenset({"outlet", "switch"})
 BUTTON_CLASSES = frozenset({"identify", "restart", "update"})
 
@@ -107,6 +140,16 @@ BUTTON_CLASSES = frozenset({"identify", "restart", "update"})
 ENERGY_DASHBOARD_UNITS = frozenset({"Wh", "kWh", "MWh", "GWh", "MJ", "GJ"})
 COUNTER_STATE_CLASSES = frozenset({"total", "total_increasing"})
 _ALWAYS_COUNTED = frozenset({"energy", "gas", "water"})  # classes HA only sums
+
+
+def binary_sensor_class(entity: Entity) -> str | None:
+    """The device class a binary sensor is published with: its own where binary sensors
+    take it (a switch's class does not carry over to it shown read-only), ``problem`` for
+    an alarm, else none."""
+    device_class = entity.ha.device_class
+    if device_class in BINARY_SENSOR_CLASSES:
+        return device_class
+    return "problem" if entity.alarm else None
 
 
 def presentation_problems(entity: Entity) -> list[str]:

@@ -5,6 +5,11 @@
 the MQTT side calls for commands; ``engine.snapshot()`` copies every counter for health
 reports and metrics. Buses are independent: a dead port or a dead unit on one bus never
 touches another bus.
+
+While it runs, a config applied live (bridge/reconfigure.py) changes it piece by piece:
+``add_bus``, ``restart_bus``, ``remove_bus``, ``add_device``, ``remove_device`` and
+``replace_mapping`` (a device's settings or mapping); the other buses and devices carry on
+untouched.
 """
 
 from __future__ import annotations
@@ -68,19 +73,26 @@ class Engine:
         self.started = time.monotonic()  # every counter starts at zero here
         self.schedulers: dict[str, BusScheduler] = {}
         self.devices: dict[str, DevicePoller] = {}
+        self._poll_share = config.bridge.gateway.poll_share
         for bus in config.buses:
-            self.schedulers[bus.id] = bus_scheduler(bus)
-            self.schedulers[bus.id].fair.share = config.bridge.gateway.poll_share
+            self.schedulers[bus.id] = self._scheduler(bus)
         self._buses = {bus.id: bus for bus in config.buses}
         self._on_update = on_update
         self._policy = policy
         self._group: asyncio.TaskGroup | None = None
         self._tasks: dict[str, asyncio.Task[None]] = {}
+        self._bus_tasks: dict[str, asyncio.Task[None]] = {}
+        self.retired: dict[str, Guard] = {}  # the guards of devices no longer polled
         # work that runs while the engine runs (and stops with it): the SunSpec walks
         self.companions: list[Callable[[], Coroutine[Any, Any, None]]] = []
         for device in config.devices:
             if device.enabled:
                 self.devices[device.id] = self._poller(device, loaded.mappings[device.id])
+
+    def _scheduler(self, bus: SerialBus | TcpBus) -> BusScheduler:
+        scheduler = bus_scheduler(bus)
+        scheduler.fair.share = self._poll_share
+        return scheduler
 
     def _poller(
         self, device: DeviceConfig, mapping: Mapping, guard: Guard = UNGUARDED
@@ -105,17 +117,84 @@ class Engine:
 
     async def run(self) -> None:
         """Run every scheduler and poller until cancelled."""
-        async with asyncio.TaskGroup() as group:
-            self._group = group
-            for bus_id, scheduler in self.schedulers.items():
-                group.create_task(scheduler.run(), name=f"bus:{bus_id}")
-            for device_id, poller in self.devices.items():
-                if poller.points:  # a SunSpec device not walked yet polls nothing
-                    self._tasks[device_id] = group.create_task(
-                        poller.run(), name=f"device:{device_id}"
-                    )
-            for companion in self.companions:
-                group.create_task(companion(), name=getattr(companion, "__name__", "companion"))
+        try:
+            async with asyncio.TaskGroup() as group:
+                self._group = group
+                for bus_id in self.schedulers:
+                    self._start_bus(bus_id)
+                for device_id in self.devices:
+                    self._start(device_id)
+                for companion in self.companions:
+                    name = getattr(companion, "__name__", "companion")
+                    group.create_task(companion(), name=name)
+                # open until cancelled: a bus restarted stops every task for a moment, and
+                # a group left with none ends (and takes no task again)
+                await asyncio.get_running_loop().create_future()
+        finally:
+            self._group = None
+            self._tasks.clear()
+            self._bus_tasks.clear()
+
+    def _start_bus(self, bus_id: str) -> None:
+        if self._group is not None:
+            scheduler = self.schedulers[bus_id]
+            self._bus_tasks[bus_id] = self._group.create_task(scheduler.run(), name=f"bus:{bus_id}")
+
+    def _start(self, device_id: str) -> None:
+        """Poll a device in the engine's TaskGroup (when running; a SunSpec device not
+        walked yet polls nothing)."""
+        poller = self.devices[device_id]
+        if self._group is not None and poller.points:
+            self._tasks[device_id] = self._group.create_task(
+                poller.run(), name=f"device:{device_id}"
+            )
+
+    async def _stop(self, device_id: str) -> None:
+        """The device's polling stopped (its poll in flight cut short; a write runs in the
+        task of its command, not here)."""
+        await _cancelled(self._tasks.pop(device_id, None))
+
+    # --- a config applied live ------------------------------------------------------------
+
+    def add_bus(self, bus: SerialBus | TcpBus) -> None:
+        """A new bus: its scheduler (and transport) started."""
+        self._buses[bus.id] = bus
+        self.schedulers[bus.id] = self._scheduler(bus)
+        self._start_bus(bus.id)
+
+    async def remove_bus(self, bus_id: str) -> None:
+        """A bus no device uses any more: its scheduler stopped, its port closed."""
+        await _cancelled(self._bus_tasks.pop(bus_id, None))
+        self.schedulers.pop(bus_id).transport.close()
+        del self._buses[bus_id]
+
+    async def restart_bus(self, bus: SerialBus | TcpBus) -> None:
+        """A bus's new settings: its devices' polling and its scheduler stopped (the port
+        closed before it is opened again), a new scheduler started. Its devices' pollers
+        are started again by ``replace_mapping``."""
+        for device_id, poller in self.devices.items():
+            if poller.device.bus == bus.id:
+                await self._stop(device_id)
+        await self.remove_bus(bus.id)
+        self.add_bus(bus)
+
+    def add_device(self, device: DeviceConfig, mapping: Mapping) -> DevicePoller:
+        """Poll a new (or enabled) device from now on; a device polled before under this id
+        keeps the guard it had (the guard only grows)."""
+        guard = self.retired.pop(device.id, UNGUARDED)
+        self.devices[device.id] = self._poller(device, mapping, guard)
+        self._start(device.id)
+        return self.devices[device.id]
+
+    async def remove_device(self, device_id: str) -> DevicePoller:
+        """Stop polling a device (removed or disabled); its poller is returned."""
+        await self._stop(device_id)
+        poller = self.devices.pop(device_id)
+        self.retired[device_id] = poller.guard
+        shares = poller.scheduler.fair.shares
+        if poller.device.gateway_poll_share is not None:
+            shares.pop(poller.device.unit, None)
+        return poller
 
     async def replace_mapping(
         self, device_id: str, mapping: Mapping, device: DeviceConfig | None = None
@@ -125,21 +204,16 @@ class Engine:
         the guard and the counters' published values carry over); the bus and the other
         devices carry on untouched."""
         old = self.device(device_id)
-        task = self._tasks.pop(device_id, None)
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await self._stop(device_id)
+        if old.device.gateway_poll_share is not None:  # its unit may change: set again below
+            old.scheduler.fair.shares.pop(old.device.unit, None)
         poller = self._poller(device or old.device, mapping, old.guard)  # the guard only grows
         poller.writer.inherit(old.writer)
         poller.state.carry_counters(old.state)
         if old.carried is not None:  # published before a restart, before it had a mapping
             poller.seed_counters(old.carried)
         self.devices[device_id] = poller
-        if self._group is not None and poller.points:
-            self._tasks[device_id] = self._group.create_task(
-                poller.run(), name=f"device:{device_id}"
-            )
+        self._start(device_id)
         return poller
 
     def device(self, device_id: str) -> DevicePoller:
@@ -163,6 +237,13 @@ class Engine:
             buses=tuple(bus_snapshot(s) for s in self.schedulers.values()),
             devices=tuple(device_snapshot(p) for p in self.devices.values()),
         )
+
+
+async def _cancelled(task: asyncio.Task[None] | None) -> None:
+    if task is not None:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
 
 
 _WITH_REASON = (Fault.LOCKED, Fault.UNMAPPED)  # offline for a reason beyond failed requests

@@ -583,8 +583,9 @@ class Simulator:
         try:
             while True:
                 await asyncio.sleep(self._tick)
-                for device in self._devices.values():
+                for device in list(self._devices.values()):
                     moving = device.moving()
                     device.image |= advance(moving, device.image, self._rng, self._tick)
+                    await asyncio.sleep(0)  # a request waits for one device's tick, not all
         finally:
             self._moving = False

@@ -334,9 +334,10 @@ async def connect(
     context: ssl.SSLContext | None,
     *,
     client_id: str | None,
-    will_topic: str,
+    will_topic: str | None,
 ) -> Connection:
-    """One connection at ``protocol``, connected (CONNACK received), or MqttConnectError."""
+    """One connection at ``protocol``, connected (CONNACK received), or MqttConnectError;
+    with no ``will_topic`` no Last Will (a probe)."""
     try:
         password = config.password_value()
     except OSError as exc:
@@ -360,7 +361,7 @@ async def connect(
         username=config.username,
         password=password,
         protocol=protocol,
-        will=aiomqtt.Will(will_topic, OFFLINE, qos=1, retain=True),
+        will=None if will_topic is None else aiomqtt.Will(will_topic, OFFLINE, qos=1, retain=True),
         keepalive=round(config.keepalive),
         tls_context=context,
         timeout=TIMEOUT,

@@ -2,8 +2,14 @@
 
 The caller owns the reconnect loop (aiomqtt's way); this is that loop, with a capped
 exponential backoff (bridge/core/backoff.py), a standby while another bridge serves the
-base topic, and the next node of a cluster after a failure. Once a broker needed the
-fallback to 3.1.1, its reconnects ask for 3.1.1 at once.
+base topic, and the next node of a cluster after a failure. Once a broker refused MQTT 5,
+its reconnects ask for 3.1.1 at once. A broker that only left an MQTT 5 CONNECT unanswered
+may be an old one (amqtt) or a stalled one (SIGSTOP, overload) at the moment the bridge
+started: on 3.1.1 a command published with retain while the bridge is connected arrives
+like a live one, so that fallback is said (WARNING), every reconnect asks for 5 first
+again, and while the session runs on 3.1.1 a probe asks the broker for MQTT 5 on a
+connection of its own (after ``PROBE_FIRST`` s, then doubling up to ``PROBE_MAX``); once
+it answers, the session ends and the bridge reconnects with MQTT 5.
 
 The session (docs/brokers.md, per broker): every connection of one run of the bridge
 uses the same client id (``mqtt.client_id``, else ``run_client_id()``, drawn once per
@@ -33,6 +39,8 @@ from bridge.mqtt.errors import BaseTopicTakenError, MqttConnectError, MqttDiscon
 from bridge.mqtt.session import MqttClient, restore_lost_cancel
 
 STANDBY_RETRY = 10.0  # seconds between two looks at a base topic another bridge serves
+PROBE_FIRST = 60.0  # seconds on a 3.1.1 fallback taken on silence before asking for 5 again
+PROBE_MAX = 900.0  # ... and at most between two probes
 
 _log = logging.getLogger(__name__)
 
@@ -81,8 +89,14 @@ async def run_with_reconnect(
                 announce=announce,
                 on_announced=functools.partial(loop.up, url),
             ) as client:
-                loop.version = client.protocol
+                loop.version = None if client.silence_fallback else client.protocol
                 loop.connected = loop.ever_connected = True
+                if client.silence_fallback:
+                    loop.fell_back(url)
+                    if not await _serve_probing(client, session):
+                        return  # the session returned
+                    loop.version = "5"  # the probe's answer: this broker speaks 5
+                    raise MqttDisconnectedError(f"{url} answers MQTT 5 now: reconnecting with 5")
                 await session(client)
             return
         except* BaseTopicTakenError as group:
@@ -96,6 +110,37 @@ async def run_with_reconnect(
         # task still says it is being cancelled, so it stops instead of reconnecting
         restore_lost_cancel()
         await asyncio.sleep(loop.standby(taken) if taken is not None else loop.down(failure, url))
+
+
+async def _serve_probing(
+    client: MqttClient, session: Callable[[MqttClient], Awaitable[None]]
+) -> bool:
+    """Run ``session`` on a 3.1.1 session taken on silence while probing for MQTT 5: True
+    when the broker answered 5 (the session cancelled), False when the session returned;
+    the session's error is raised as the loop knows it."""
+    delay = PROBE_FIRST
+
+    async def probing() -> None:
+        nonlocal delay
+        while True:
+            await asyncio.sleep(delay)
+            if await client.answers_5():
+                return
+            delay = min(delay * 2, PROBE_MAX)
+
+    try:
+        async with asyncio.TaskGroup() as group:
+            probe = group.create_task(probing(), name="mqtt5-probe")
+            serving = group.create_task(_awaited(session(client)), name="mqtt-session")
+            await asyncio.wait({probe, serving}, return_when=asyncio.FIRST_COMPLETED)
+            (serving if probe.done() else probe).cancel()
+    except BaseExceptionGroup as failed:  # the session's own error, as the loop knows it
+        raise failed.exceptions[0] from None
+    return not probe.cancelled()
+
+
+async def _awaited(work: Awaitable[None]) -> None:
+    await work
 
 
 class _Reconnection:
@@ -113,10 +158,26 @@ class _Reconnection:
         # one id for every connection of this run (module docstring: the session)
         self.client_id = config.client_id or run_client_id()
         self.version: str | None = None  # what the broker answered last time
+        self.warned_fallback = False
         self.outage: str | None = None
         self.standing_by = False
         self.connected = False  # this attempt's session started
         self.ever_connected = False
+
+    def fell_back(self, url: str) -> None:
+        """The session runs on 3.1.1 because MQTT 5 went unanswered: said once a run."""
+        if self.warned_fallback:
+            return
+        self.warned_fallback = True
+        _log.warning(
+            "MQTT: %s left an MQTT 5 CONNECT unanswered and took 3.1.1: a stalled broker, or"
+            ' one without MQTT 5 (then set mqtt.version: "3.1.1"). On 3.1.1 a command'
+            " published with retain while the bridge is connected cannot be told from a"
+            " live one; the bridge asks for MQTT 5 again in %.0f s and at each reconnect",
+            url,
+            PROBE_FIRST,
+            extra={"event": "mqtt_fallback", "broker": url},
+        )
 
     def up(self, url: str, protocol: str) -> None:
         """The session said online."""

@@ -114,6 +114,9 @@ class MqttClient:
         # stall (SIGSTOP, overload), not an old broker, and 3.1.1 would lose the retain flag
         # of live commands, so a retained command published meanwhile would run
         self._known_5 = version == "5"
+        # 3.1.1 taken after an MQTT 5 CONNECT went unanswered: an old broker (amqtt) or a
+        # stalled one; the reconnect loop asks for 5 again (bridge/mqtt/reconnect.py)
+        self.silence_fallback = False
         self._will_topic = will_topic
         self._client_id = client_id if client_id is not None else config.client_id
         self._connection: Connection | None = None
@@ -154,6 +157,7 @@ class MqttClient:
                     raise  # the reconnect loop tries MQTT 5 again
                 if isinstance(exc, MqttUnansweredError):
                     _log.info("%s does not answer an MQTT 5 CONNECT; trying 3.1.1", url)
+                    self.silence_fallback = True
                 elif exc.code == _UNSUPPORTED_PROTOCOL_VERSION:
                     _log.info("%s does not speak MQTT 5; using 3.1.1", url)
                 else:
@@ -169,6 +173,28 @@ class MqttClient:
                 await self.__aexit__(None, None, None)
                 raise
         return self
+
+    async def answers_5(self) -> bool:
+        """Whether the broker answers an MQTT 5 CONNECT now: a probe on a connection of its
+        own (its own client id, no Last Will, a clean DISCONNECT), this session untouched."""
+        try:
+            context = await asyncio.to_thread(tls_context, self._config)
+            probe = await connect(
+                self._config,
+                aiomqtt.ProtocolVersion.V5,
+                context,
+                client_id=f"{self._client_id or 'modbusbridge'}-probe",
+                will_topic=None,
+            )
+        except (MqttConnectError, OSError, ssl.SSLError):
+            return False
+        try:
+            await probe.__aexit__(None, None, None)
+        except aiomqtt.MqttError as error:
+            _log.debug("the MQTT 5 probe did not disconnect cleanly: %s", error)
+        finally:
+            probe.abort()
+        return True
 
     async def announce(self) -> None:
         """``online`` on the will topic (retained): from now on a stop says goodbye."""

@@ -18,6 +18,8 @@
     GET  api/library[?q=...]             the shipped mappings, searched (bridge/web/library.py)
     POST api/add/scan|identify, api/trial   "Add a device" on a configured or a new bus
                                          (bridge/web/adding.py); each logged once: who, what
+    POST api/entity/preview|add          a raw register as a new entity of a device's
+                                         mapping (bridge/web/entity.py)
 
 Every ``api/`` route but ``login`` needs access (bridge/web/access.py); every POST must
 come from the page itself. At most ``MAX_REQUESTS`` commissioning requests run at once.
@@ -31,7 +33,7 @@ import json
 import logging
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
@@ -45,6 +47,8 @@ from bridge.modbus.engine import Engine
 from bridge.modbus.ports import serial_ports
 from bridge.web.access import Access, Refusal, change_refusal
 from bridge.web.adding import Adding
+from bridge.web.entity import ROUTES as ENTITY_ROUTES
+from bridge.web.entity import EntityRoutes
 from bridge.web.http import EventSink, EventStream, Request, Response
 from bridge.web.library import QueryError, search, shipped_rows
 from bridge.web.live import WebFeed
@@ -61,6 +65,7 @@ STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
     "/add.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
+    "/entity.js": "text/javascript; charset=utf-8",
 }
 ADDING = {"/api/add/scan": "scan", "/api/add/identify": "identify", "/api/trial": "trial"}
 CATALOGUES = frozenset({"/api/ports", "/api/library"})
@@ -118,6 +123,7 @@ class WebApp:
         self.running = 0  # commissioning requests running
         self.adding = Adding(bridge)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
+        self.entities = EntityRoutes(bridge)
 
     async def handle(self, request: Request) -> Response | EventStream:
         path, method = request.path, request.method
@@ -136,6 +142,8 @@ class WebApp:
             return await self._add(request, ADDING[path])
         if path in CATALOGUES and method == "GET":
             return await self._catalogue(request)
+        if path in ENTITY_ROUTES:
+            return await self._change(request, self.entities.handle)
         if method not in ("GET", "HEAD"):
             return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
         return self._read(request)
@@ -252,6 +260,25 @@ class WebApp:
                     await sink.send("overview", self._fresh("overview", self.overview).decode())
                     sent = time.monotonic()
                 await asyncio.sleep(SEND_GAP)
+
+    async def _change(
+        self, request: Request, run: Callable[[Request], Awaitable[Response]]
+    ) -> Response:
+        """A change from the page: a POST of JSON from the page itself, ``MAX_REQUESTS``
+        at most running with the commissioning requests."""
+        if request.method != "POST":
+            return _error(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        refusal = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            log.warning("change refused from %s: %s", request.peer, refusal.message)
+            return _error(refusal.status, refusal.message)
+        if self.running >= MAX_REQUESTS:
+            return _error(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        self.running += 1
+        try:
+            return await run(request)
+        finally:
+            self.running -= 1
 
     # --- commissioning ----------------------------------------------------------------
 

@@ -6,12 +6,20 @@ through ``bridge.core.state``. Nothing here touches a bus or waits.
                 devices: [summary],
                 buses: [{id, transport, connected, utilisation, requests_per_s, requests,
                          timeouts, frame_errors, exceptions, reopenings}]}
-    summary    {id, name, model, mapping, bus, unit, state, status, alarms, last_success,
-                latency_p50_ms, latency_p95_ms, requests, errors, timeouts, backoff_s}
+    summary    {id, name, model, mapping, bus, unit, state, status, status_text, alarms,
+                alarm_names, last_success, latency_p50_ms, latency_p95_ms, requests,
+                errors, timeouts, backoff_s}
     device     summary + {topic, values: [value]}
-    value      {key, name, value, unit, decimals, alarm, component, category, writable}
+    value      {key, name, value, text, unit, decimals, alarm, component, category, writable}
                (decimals null: not known yet, a scale_by value's exponent unread)
-    values     {device, status, alarms, values: {key: value}}  (the keys that changed)
+    values     {device, status, status_text, alarms, alarm_names, values: {key: value}}
+               (the keys that changed)
+
+The page speaks as Home Assistant does (``bridge.core.wording``): ``name`` is the entity's
+name as Home Assistant shows it, ``text`` the value in its words (``Running forward``,
+``Not running``, ``12.5``, ``Unknown``) beside ``value`` as the state document has it
+(``running_forward``, ``false``); ``status_text`` and ``alarm_names`` likewise, beside
+``status`` and ``alarms`` (the keys MQTT clients match).
 
 Bus utilisation and request rates cover the last ``WINDOW`` seconds (``BusWindow``).
 """
@@ -22,9 +30,12 @@ from collections import deque
 from collections.abc import Iterable
 from typing import Any
 
-from bridge.core.codec import decimals_of, unit_of
+from bridge.core.codec import Value, decimals_of, unit_of
+from bridge.core.discovery_entity import shown_name
 from bridge.core.health_report import Snapshot, build_health_report
+from bridge.core.mapping import Point
 from bridge.core.state import active_alarms, alarm_active, published
+from bridge.core.wording import alarm_texts, unit_sources, value_text
 from bridge.modbus.poller import DevicePoller
 
 WINDOW = 10.0  # seconds of bus traffic the utilisation covers
@@ -74,8 +85,7 @@ def summary(poller: DevicePoller, health: dict[str, Any]) -> dict[str, Any]:
         "unit": device.unit,
         "state": health.get("state", "unknown"),
         "error": health.get("error"),  # offline with a reason: a failed SunSpec walk
-        "status": poller.values.get(mapping.status) if mapping.status else None,
-        "alarms": active_alarms(poller.points, poller.values),
+        **status_and_alarms(poller),
         "last_success": health.get("last_success"),
         "latency_p50_ms": health.get("latency_p50_ms"),
         "latency_p95_ms": health.get("latency_p95_ms"),
@@ -88,21 +98,40 @@ def summary(poller: DevicePoller, health: dict[str, Any]) -> dict[str, Any]:
 
 def device_document(poller: DevicePoller, health: dict[str, Any], topic: str) -> dict[str, Any]:
     """A device's page: its summary, its MQTT topic and every published value."""
+    units = unit_sources(poller.points)
     return {
         **summary(poller, health),
         "topic": topic,
-        "values": [value_row(poller, key) for key in published(poller.points)],
+        "values": [value_row(poller, key, units) for key in published(poller.points)],
     }
 
 
-def value_row(poller: DevicePoller, key: str) -> dict[str, Any]:
+def status_and_alarms(poller: DevicePoller) -> dict[str, Any]:
+    """The device's status and active alarms, as the state document has them and in the
+    words Home Assistant shows."""
+    device, mapping = poller.device, poller.mapping
+    status = poller.values.get(mapping.status) if mapping.status else None
+    point = poller.points.get(mapping.status) if mapping.status else None
+    alarms = active_alarms(poller.points, poller.values)
+    return {
+        "status": status,
+        "status_text": None if point is None else _text(poller, point, status),
+        "alarms": alarms,
+        "alarm_names": alarm_texts(poller.points, alarms, device.display_name),
+    }
+
+
+def value_row(poller: DevicePoller, key: str, units: frozenset[str]) -> dict[str, Any]:
+    """One value, as published and as Home Assistant shows it (``units``: the keys whose
+    labels are units, ``wording.unit_sources``)."""
     point = poller.points[key]
     entity = point.entity
     value = poller.values.get(key)
     return {
         "key": key,
-        "name": entity.name,
+        "name": shown_name(entity.name, poller.device.display_name),
         "value": value,
+        "text": _text(poller, point, value, key in units),
         "unit": unit_of(point, poller.image),
         "decimals": decimals_of(point, poller.image),
         "alarm": alarm_active(point, value),
@@ -115,10 +144,15 @@ def value_row(poller: DevicePoller, key: str) -> dict[str, Any]:
 def changed_values(poller: DevicePoller, keys: Iterable[str]) -> dict[str, Any]:
     """The values of ``keys`` (those published) with the device's status and alarms."""
     shown = set(published(poller.points))
-    mapping = poller.mapping
+    units = unit_sources(poller.points)
     return {
         "device": poller.device.id,
-        "status": poller.values.get(mapping.status) if mapping.status else None,
-        "alarms": active_alarms(poller.points, poller.values),
-        "values": {key: value_row(poller, key) for key in sorted(set(keys) & shown)},
+        **status_and_alarms(poller),
+        "values": {key: value_row(poller, key, units) for key in sorted(set(keys) & shown)},
     }
+
+
+def _text(poller: DevicePoller, point: Point, value: Value, units: bool = False) -> str:
+    decimals = decimals_of(point, poller.image)
+    allowed = poller.device.allow_dangerous_writes
+    return value_text(point.entity, value, decimals, allowed, units)

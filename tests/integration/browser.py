@@ -3,7 +3,8 @@
 ``browser(folder)`` starts Debian's ``chromium`` with a fresh profile in ``folder`` (no
 network beyond what the page asks for, no first-run, no sync, no component updates) and
 yields a ``Page``: ``goto``, ``evaluate`` JavaScript, wait ``until`` an expression is
-true, press a key, take a screenshot. The browser (its whole process group) is ended
+true, press a key, take a screenshot. ``png_with_text`` and ``png_text`` write and read a
+text chunk of a PNG (what a screenshot in docs/ shows, in words, to compare). The browser (its whole process group) is ended
 when the block ends.
 """
 
@@ -17,8 +18,10 @@ import json
 import os
 import shutil
 import signal
+import struct
 import subprocess
 import urllib.request
+import zlib
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -117,6 +120,39 @@ class Page:
         await asyncio.sleep(0.3)  # one layout at the new size
         shot = await self.send("Page.captureScreenshot", format="png")
         path.write_bytes(base64.b64decode(shot["data"]))
+
+    async def screenshot_whole(self, path: Path, width: int) -> None:
+        """The whole page at ``width``, as tall as its content."""
+        await self.screenshot(path, width, 400)
+        height = await self.evaluate("document.documentElement.scrollHeight")
+        await self.screenshot(path, width, int(height))
+
+
+def png_with_text(png: bytes, keyword: str, text: str) -> bytes:
+    """``png`` with an iTXt chunk: ``keyword`` -> ``text`` (UTF-8), placed before IEND."""
+    data = keyword.encode("latin-1") + b"\0\0\0\0\0" + text.encode("utf-8")
+    chunk = _chunk(b"iTXt", data)
+    end = png.rindex(b"IEND") - 4  # the IEND chunk's length field
+    return png[:end] + chunk + png[end:]
+
+
+def png_text(png: bytes, keyword: str) -> str | None:
+    """The text of ``png``'s iTXt chunk ``keyword`` (uncompressed), or None."""
+    at = 8  # after the signature
+    while at + 8 <= len(png):
+        (length,) = struct.unpack(">I", png[at : at + 4])
+        kind, data = png[at + 4 : at + 8], png[at + 8 : at + 8 + length]
+        name, _, rest = data.partition(b"\0")
+        if kind == b"iTXt" and name == keyword.encode("latin-1") and rest[:1] == b"\0":
+            _language, _, rest = rest[2:].partition(b"\0")
+            _translated, _, text = rest.partition(b"\0")
+            return text.decode("utf-8")
+        at += 12 + length
+    return None
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
 @contextlib.asynccontextmanager

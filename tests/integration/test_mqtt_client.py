@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import socket
 import time
 from collections.abc import AsyncIterator, Awaitable
@@ -27,6 +28,7 @@ from bridge.mqtt import (
     run_with_reconnect,
 )
 from bridge.mqtt import connection as connection_module
+from bridge.mqtt import reconnect as reconnect_module
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.harness import eventually
 from tests.integration.mosquitto import Broker, TlsFiles
@@ -363,7 +365,8 @@ class StubBroker:
     ) -> None:
         self.silent = silent  # never answer CONNECT
         self.connack = connack  # the return code to a 3.1.1 CONNECT (3: server unavailable)
-        self.mqtt5 = mqtt5  # an MQTT 5 CONNECT: "refuse" it, "ignore" it (amqtt), "close"
+        # an MQTT 5 CONNECT: "refuse" it, "ignore" it (amqtt), "close", or "answer" it
+        self.mqtt5 = mqtt5
         self.dies_on = dies_on  # a PUBLISH to this topic is never acknowledged: the link dies
         self.levels: list[int] = []
         self.server: asyncio.Server | None = None
@@ -398,6 +401,10 @@ class StubBroker:
                     continue
                 if body[6] == 5 and self.mqtt5 == "close":
                     return
+                if body[6] == 5 and self.mqtt5 == "answer":
+                    writer.write(b"\x20\x03\x00\x00\x00")  # CONNACK: success, no properties
+                    await writer.drain()
+                    continue
                 if body[6] != 4:
                     writer.write(b"\x20\x02\x00\x01")  # unacceptable protocol version
                     await writer.drain()
@@ -475,9 +482,34 @@ async def test_no_fallback_when_nothing_listens(monkeypatch: pytest.MonkeyPatch)
 
 
 @pytest.mark.asyncio
-async def test_reconnects_ask_for_3_1_1_once_the_broker_needed_it(
+async def test_reconnects_ask_for_3_1_1_once_the_broker_refused_5(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.5)
+    stub = StubBroker(mqtt5="refuse")
+    sessions: list[str] = []
+
+    async def session(client: MqttClient) -> None:
+        sessions.append(client.protocol)
+        if len(sessions) == 1:
+            raise MqttDisconnectedError("lost")
+
+    async with stub as url:
+        config = cfg(url, version="5")
+        await asyncio.wait_for(
+            run_with_reconnect(config, STATE, session, backoff=ReconnectBackoff(initial=0.01)),
+            timeout=10,
+        )
+    assert sessions == ["3.1.1", "3.1.1"]
+    assert stub.levels == [5, 4, 4]  # the second connect did not try 5 again
+
+
+@pytest.mark.asyncio
+async def test_a_broker_silent_to_5_is_asked_for_5_again_at_each_reconnect(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Silence is not a refusal: the broker may have been stalled at that moment, and on
+    3.1.1 a live retained command loses its retain flag. Said once a run (WARNING)."""
     monkeypatch.setattr(connection_module, "TIMEOUT", 0.5)
     stub = StubBroker(mqtt5="ignore")
     sessions: list[str] = []
@@ -494,7 +526,61 @@ async def test_reconnects_ask_for_3_1_1_once_the_broker_needed_it(
             timeout=10,
         )
     assert sessions == ["3.1.1", "3.1.1"]
-    assert stub.levels == [5, 4, 4]  # the second connect did not try 5 again
+    assert stub.levels == [5, 4, 5, 4]
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len([m for m in said if "left an MQTT 5 CONNECT unanswered" in m]) == 1
+
+
+@pytest.mark.asyncio
+async def test_a_broker_stalled_at_the_first_connect_gets_mqtt_5_once_it_answers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Found by the soak (issue 38): a broker stalled when the bridge started (SIGSTOP,
+    overload) leaves the MQTT 5 CONNECT unanswered, wakes up in time for the 3.1.1 one,
+    and the bridge would have stayed on 3.1.1 for the whole run. A probe on a connection
+    of its own (no will, its own client id) finds MQTT 5 answered; the 3.1.1 session
+    ends and the next one is MQTT 5."""
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.5)
+    monkeypatch.setattr(reconnect_module, "PROBE_FIRST", 0.2)
+    stub = StubBroker(mqtt5="ignore")
+    sessions: list[str] = []
+
+    async def session(client: MqttClient) -> None:
+        sessions.append(client.protocol)
+        if len(sessions) == 1:
+            stub.mqtt5 = "answer"  # the broker runs again
+            await asyncio.sleep(3600)  # served until the probe's answer ends it
+
+    async with stub as url:
+        config = cfg(url, version="5")
+        await asyncio.wait_for(
+            run_with_reconnect(config, STATE, session, backoff=ReconnectBackoff(initial=0.01)),
+            timeout=10,
+        )
+    assert sessions == ["3.1.1", "5"]
+    assert stub.levels == [5, 4, 5, 5]  # the probe's CONNECT, then the session's
+
+
+@pytest.mark.asyncio
+async def test_a_probe_unanswered_leaves_the_3_1_1_session_alone_and_tries_later(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An old broker (amqtt) never answers the probe: the session goes on, undisturbed,
+    and the probes come further and further apart."""
+    monkeypatch.setattr(connection_module, "TIMEOUT", 0.2)
+    monkeypatch.setattr(reconnect_module, "PROBE_FIRST", 0.1)
+    stub = StubBroker(mqtt5="ignore")
+    sessions: list[str] = []
+
+    async def session(client: MqttClient) -> None:
+        sessions.append(client.protocol)
+        await eventually(lambda: stub.levels.count(5) >= 3, 10)  # two probes went out
+        await client.publish("t/still", "here", qos=1)  # the session still works
+
+    async with stub as url:
+        await asyncio.wait_for(run_with_reconnect(cfg(url, version="5"), STATE, session), 15)
+    assert sessions == ["3.1.1"]
+    assert stub.levels.count(4) == 1  # one session throughout
 
 
 @pytest.mark.asyncio

@@ -28,8 +28,9 @@ from tests.ports import free_port
 
 SEEDS = ("nastec_vasco", "p2_vfd", "soft_starter", "vacon_nx", "smartgen_hgm6100")
 # units on one simulated gateway (one bus, one frame in flight): two of each seed model,
-# so that no bus is near its capacity on a busy test machine (the soft starter's watchdog
-# wants a frame every 2 s, and says so when it did not get one)
+# so that no bus is near its capacity on a busy test machine (the Vacon's watchdog wants a
+# frame every 2 s, and the bridge says so when it did not get one: the simulator's ticks
+# yield between devices, or a busy machine holds every answer for the whole sweep)
 PER_GATEWAY = 10
 
 

@@ -486,6 +486,8 @@ async def test_refusals_are_counted_in_health(mosquitto: Broker) -> None:
         )
         report = observer.json("modbus/bridge/health")["messages"]
         assert set(report) == {"commands", "refused", "coalesced", "dropped"}
+        process = observer.json("modbus/bridge/health")["process"]
+        assert process["tasks"] > 0 and process["outbox"] >= 0  # the soak's slopes read these
 
 
 def test_the_simulated_sign_register_is_where_the_mapping_says() -> None:

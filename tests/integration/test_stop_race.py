@@ -200,13 +200,12 @@ async def stopped_after(
     return took, b"".join(log).decode(errors="replace")
 
 
-async def retained_online(broker: Broker) -> None:
+async def retained_online(broker: Broker, device: str = "pump") -> None:
     config = MqttConfig(url=broker.url)
+    topic = f"race/{device}/availability"
     async with MqttClient(config, will_topic="watcher/state", client_id="watcher") as client:
         async with asyncio.timeout(15):
-            while (await client.retained("race/pump/availability", settle=0.2)).get(
-                "race/pump/availability"
-            ) != b"online":
+            while (await client.retained(topic, settle=0.2)).get(topic) != b"online":
                 await asyncio.sleep(0.2)
 
 

@@ -230,6 +230,34 @@ async def test_a_firmware_update_while_running_is_found_when_the_device_answers_
 
 
 @pytest.mark.asyncio
+async def test_a_device_that_keeps_dropping_off_is_checked_once_per_gap(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A noisy line drops the inverter off and on again and again: its chain is checked
+    at its first return, and not again within ``REWALK_GAP`` (10 min by default; an hour
+    here), however often it returns."""
+    monkeypatch.setattr(sunspec_devices, "REWALK_GAP", 3600.0)
+    sim = Simulator([seed_unit(1), SunSpecUnit(2, image("inverter_123", 40000))], tick=0)
+    async with serving_tcp(sim) as port:
+        inverter = {"id": "inverter", "bus": "tcp", "unit": 2, "mapping": "sunspec", "poll": POLL}
+        loaded = site_config(tmp_path, [tcp_bus(port, timeout=0.3)], [SEED, inverter])
+        async with running(loaded) as (engine, management, _):
+            await eventually(lambda: engine.devices["inverter"].health.online is True, 20)
+            await eventually(lambda: management.sunspec.walks >= 1, 20)  # built at the start
+            walks = management.sunspec.walks
+            for returned in range(3):
+                sim.set_quirks(2, Quirks(dead=True))
+                await eventually(lambda: engine.devices["inverter"].health.online is False, 20)
+                await asyncio.sleep(2 * sunspec_devices.WATCH)  # the watcher saw it offline
+                sim.set_quirks(2, Quirks())
+                await eventually(lambda: engine.devices["inverter"].health.online is True, 20)
+                if returned == 0:
+                    await eventually(lambda: management.sunspec.walks == walks + 1, 20)
+            await asyncio.sleep(3 * sunspec_devices.WATCH)  # the watcher looked again
+            assert management.sunspec.walks == walks + 1
+
+
+@pytest.mark.asyncio
 async def test_a_dead_and_a_non_sunspec_unit_are_offline_and_delay_no_other(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:

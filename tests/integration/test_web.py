@@ -21,6 +21,7 @@ import pytest
 from bridge.app import Bridge
 from bridge.cli.demo import SEEDS
 from bridge.config import MqttConfig, load_config_data
+from bridge.core.discovery_alarms import in_words
 from bridge.core.entity import Table
 from bridge.modbus.simulator import Quirks
 from bridge.mqtt import MqttClient
@@ -78,12 +79,14 @@ async def test_overview_and_device_pages_show_what_the_bridge_knows(
         device = (await http(s.port, "GET", "/api/devices/pump")).json()
         assert device["topic"] == "modbus/pump"
         rows = {row["key"]: row for row in device["values"]}
-        assert rows["motor_current"] | {"decimals": 0} == {
+        decimals = rows["motor_current"]["decimals"]
+        assert rows["motor_current"] == {
             "key": "motor_current",
             "name": "Motor current",
             "value": 7.5,
+            "text": f"{7.5:.{decimals}f}",
             "unit": "A",
-            "decimals": 0,
+            "decimals": decimals,
             "alarm": False,
             "component": "sensor",
             "category": None,
@@ -91,6 +94,12 @@ async def test_overview_and_device_pages_show_what_the_bridge_knows(
         }
         assert "password_1_left" not in rows  # secrets are never shown
         assert device["status"] == s.bridge.engine.devices["pump"].values["status"]
+        # the page speaks as Home Assistant does: labels in words, the key beside them
+        assert device["status_text"] == in_words(device["status"])
+        starter = (await http(s.port, "GET", "/api/devices/starter")).json()
+        assert (starter["status"], starter["status_text"]) == ("no_fault", "No fault")
+        fault = next(row for row in starter["values"] if row["key"] == "fault_status")
+        assert (fault["value"], fault["text"]) == ("no_fault", "No fault")
         missing = await http(s.port, "GET", "/api/devices/nope")
         assert missing.status == 404
 
@@ -117,8 +126,12 @@ async def test_events_carry_value_changes_alarms_and_a_device_going_offline_and_
 
             s.sim.set_value(PUMP, "alarm_dry_running", True)
             alarm = await stream.next("values", lambda d: "alarm_dry_running" in d["values"])
-            assert alarm["values"]["alarm_dry_running"]["alarm"] is True
+            dry = alarm["values"]["alarm_dry_running"]
+            assert (dry["alarm"], dry["value"], dry["text"]) == (True, True, "Problem")
             assert "alarm_dry_running" in alarm["alarms"]
+            named = dict(zip(alarm["alarms"], alarm["alarm_names"], strict=True))
+            assert named["alarm_dry_running"] == "Dry running"  # as Home Assistant names it
+            assert alarm["status_text"] == in_words(alarm["status"])
 
             s.sim.set_quirks(PUMP, Quirks(dead=True))
             await stream.next("overview", lambda o: _state(o, "pump") == "offline")

@@ -15,14 +15,16 @@ from pathlib import Path
 import pytest
 
 from bridge.modbus.simulator import Quirks
-from tests.integration.browser import CHROMIUM, Page, browser
+from tests.integration.browser import CHROMIUM, Page, browser, png_text, png_with_text
 from tests.integration.mosquitto import Broker
-from tests.integration.web import PUMP, site
+from tests.integration.web import PUMP, demo_site, site
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)"
 )
 SCREENSHOTS = os.environ.get("BRIDGE_SCREENSHOTS")  # a folder: keep the screenshots there
+README_SHOT = Path(__file__).parents[2] / "docs" / "web-devices.png"
+UPDATE = os.environ.get("UPDATE_SCREENSHOTS") == "1"  # write README_SHOT even if it matches
 
 
 def text(selector: str) -> str:
@@ -80,8 +82,13 @@ async def test_a_technician_sees_values_change_a_device_drop_out_and_a_scan(
         s.sim.set_value(PUMP, "alarm_dry_running", True)
         await page.until(f"document.querySelector({dry!r})?.classList.contains('alarm')")
         assert "ALARM" in await page.evaluate(text(dry))
+        # the change arrives in Home Assistant's words: an alarm bit is a problem sensor
+        assert await page.evaluate(text(f"{dry} .value")) == "Problem"
         alarms = await page.until(text("#device-alarms"))
-        assert alarms == "Active alarms: alarm_dry_running"
+        assert alarms == "Active alarms: Dry running"  # the name Home Assistant shows
+        assert await page.evaluate("document.querySelector('#device-alarms').title") == (
+            "alarm_dry_running"  # the key MQTT clients match
+        )
 
         await device_state(page, "online")
         s.sim.set_quirks(PUMP, Quirks(dead=True))
@@ -104,6 +111,69 @@ async def test_a_technician_sees_values_change_a_device_drop_out_and_a_scan(
         await page.until(f"{identified}.startsWith('answers like')", timeout=30)
         assert "(soft_starter)" in await page.evaluate(identified)
         await _screenshot(page, tmp_path, "web-commissioning.png")
+
+
+# What the devices page says, in words, without what changes from run to run (the time of
+# the last answer, latency, counts): the title bar, the pages, the table's headings and each
+# device's name, model, bus and unit, state and status (with the key in its title).
+PAGE_WORDS = """(() => {
+  const words = (nodes) => [...nodes].map((n) => n.textContent.trim() + (n.title ? ` (${n.title})` : ""));
+  const rows = [...document.querySelectorAll("#devices tbody tr")];
+  return [
+    words(document.querySelectorAll("header h1, #link")).join(" · "),
+    words(document.querySelectorAll("nav a")).join(" | "),
+    words(document.querySelectorAll("#devices-title, #devices thead th")).join(" | "),
+    ...rows.map((tr) => words([...tr.cells].slice(0, 5)).join(" | ")),
+  ].join("\\n");
+})()"""
+
+
+@pytest.mark.asyncio
+@pytest.mark.timeout(120)
+async def test_the_readme_screenshot_is_the_devices_page_of_today(
+    mosquitto: Broker, tmp_path: Path
+) -> None:
+    """The demo's five seed devices on the page, in Home Assistant's words (the P2 drive
+    ``Running forward``, not ``running_forward``); docs/web-devices.png (the README's
+    screenshot) is this page: it carries the page's words, and is written anew from the
+    running page when they differ (the test then fails: commit the new image) or when
+    ``UPDATE_SCREENSHOTS=1``."""
+    async with demo_site(mosquitto, tmp_path) as s, browser(tmp_path) as page:
+        await page.goto(f"http://127.0.0.1:{s.port}/")
+        read = "[...document.querySelectorAll('#devices td.status')].map((c) => c.dataset.value)"
+        await page.until(f"{read}.length === 5 && {read}.every((v) => v)", timeout=40)
+        states = "[...document.querySelectorAll('#devices td.state')].map((c) => c.textContent)"
+        await page.until(f"{states}.every((state) => state === 'online')", timeout=20)
+        await page.until(f"{text('#link')} === 'MQTT online · page live'")
+
+        fan = '#devices tr[data-device="fan_drive"] td.status'
+        assert await page.evaluate(text(fan)) == "Running forward"
+        assert await page.evaluate(f"document.querySelector({fan!r}).title") == "running_forward"
+        shown = await page.evaluate(text("#devices tbody"))
+        for key in ("running_forward", "no_fault", "normal_running", "true"):
+            assert key not in shown, shown
+        words = await page.evaluate(PAGE_WORDS)
+        shot = tmp_path / "web-devices.png"
+        await page.screenshot_whole(shot, 1200)
+
+        kept = png_text(README_SHOT.read_bytes(), "page") if README_SHOT.exists() else None
+        if UPDATE or kept != words:
+            README_SHOT.write_bytes(png_with_text(shot.read_bytes(), "page", words))
+        assert UPDATE or kept == words, (
+            f"{README_SHOT} showed an older page; written anew from this one: commit it"
+            f"\n--- it showed:\n{kept}\n--- the page shows:\n{words}"
+        )
+
+        await page.goto(f"http://127.0.0.1:{s.port}/#/device/fan_drive")
+        await page.until(f"{text('#device-facts dd.status')} === 'Running forward'")
+        for key, words_of_it, value in (
+            ("status", "Running forward", "running_forward"),
+            ("fault_code", "No fault", "no_fault"),
+            ("running", "Running", "true"),  # a binary sensor of class running, as HA shows it
+        ):
+            cell = f'#values tr[data-key="{key}"] .value'
+            assert await page.evaluate(text(cell)) == words_of_it, key
+            assert await page.evaluate(f"document.querySelector({cell!r}).dataset.value") == value
 
 
 async def _screenshot(page: Page, folder: Path, name: str) -> None:

@@ -3,6 +3,7 @@ event-stream reader. Plain sockets, so that every header and byte is the test's 
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import contextlib
 import json
@@ -12,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from bridge.app import Bridge
+from bridge.cli.demo import BrokerChoice, demo_config
+from bridge.cli.demo_site import SITES
 from bridge.config import load_config_data
 from bridge.modbus.simulator import Simulator
 from tests.integration.harness import cancel, serving_tcp, simulator
@@ -58,6 +61,28 @@ async def site(
         for device in data["devices"]:
             device["poll"] = {"fast": 0.2, "slow": 2}
         running = Bridge(load_config_data(data, folder / "config.yaml"))
+        task = asyncio.create_task(running.run())
+        try:
+            await listening(port)
+            yield Site(running, sim, port)
+        finally:
+            await cancel(task)
+
+
+@contextlib.asynccontextmanager
+async def demo_site(broker: Broker, folder: Path) -> AsyncIterator[Site]:
+    """The demo's site (``demo --site seeds``): the five seed devices as units 1..5 on the
+    bus ``demo``, with the demo's names and config; their values stand still (tick 0), so
+    what the page says of them is the same at every run."""
+    seeds = SITES["seeds"]
+    sim = simulator(*((d.unit, d.mapping) for d in seeds.devices), tick=0)
+    port = free_port()
+    async with serving_tcp(sim) as modbus_port:
+        args = argparse.Namespace(base_topic="modbus", site=seeds.name, username=None)
+        args.password_file = args.password_env = None
+        where = {"demo": f"127.0.0.1:{modbus_port}"}
+        config = demo_config(BrokerChoice(broker.url, "given"), where, args, web_port=port)
+        running = Bridge(config)
         task = asyncio.create_task(running.run())
         try:
             await listening(port)

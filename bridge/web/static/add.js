@@ -1,6 +1,6 @@
 // "Add a device" (#/add): pick a bus (or a new one), scan, see what each unit is, pick a
-// mapping from the library, try it. Uses app.js's helpers ($, el, row, api, run,
-// formatValue, number). Every request only reads; nothing is saved by trying.
+// mapping from the library, try it, save. Uses app.js's helpers ($, el, row, api, run,
+// number, valueRow). Every request before Save only reads.
 "use strict";
 
 const adding = { ports: null, found: new Map(), searched: "", timer: 0, buses: "", mappings: new Map() };
@@ -183,12 +183,7 @@ async function tryIt() {
   const data = await addStep("api/trial", proposed());
   const table = $("#add-values");
   table.hidden = false;
-  $("tbody", table).replaceChildren(...data.values.map((v) => {
-    const name = el("th", v.name);
-    name.scope = "row";
-    return row([name, el("td", formatValue(v.value, v.decimals), "num value"), v.unit || "", el("td", v.key, "key")],
-      { "data-key": v.key, class: v.value === null ? "unread" : "" });
-  }));
+  $("tbody", table).replaceChildren(...data.values.map(valueRow));  // as the device page shows them
   status.textContent = data.note
     ? `${data.model}: ${data.note}`
     : `${data.model}: ${data.read} of ${data.values.length} values read in ${data.requests} requests`;

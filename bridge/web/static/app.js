@@ -37,7 +37,8 @@ function patchRow(old, fresh) {
   old.className = fresh.className;
   [...fresh.cells].forEach((cell, i) => {
     const target = old.cells[i];
-    if (!target || target.textContent !== cell.textContent || target.className !== cell.className) {
+    if (!target || target.textContent !== cell.textContent || target.className !== cell.className ||
+        target.title !== cell.title) {
       if (target) target.replaceWith(cell); else old.append(cell);
     }
   });
@@ -51,6 +52,16 @@ function formatValue(value, decimals) {
     return value.toFixed(decimals);
   }
   return String(value);
+}
+
+// A value in Home Assistant's words (the JSON's text), the state document's own value
+// (running_forward, true) kept as the cell's title and data-value.
+function shown(tag, text, raw, className) {
+  const node = el(tag, text ?? "–", className);
+  const value = raw === null || raw === undefined ? "" : String(raw);
+  node.dataset.value = value;
+  if (value !== "" && value !== node.textContent) node.title = value;
+  return node;
 }
 
 function time(iso) {
@@ -132,10 +143,10 @@ function renderOverview(overview) {
       const name = el("th");
       name.scope = "row";
       name.append(link);
-      const errors = `${d.errors} / ${d.requests}` + (d.alarms.length ? ` · alarms: ${d.alarms.join(", ")}` : "");
+      const errors = `${d.errors} / ${d.requests}` + (d.alarms.length ? ` · alarms: ${d.alarm_names.join(", ")}` : "");
       return row(
         [name, d.model, `${d.bus} / ${d.unit}`, el("td", d.state, `state ${d.state}`),
-         formatValue(d.status), time(d.last_success),
+         shown("td", d.status_text, d.status, "status"), el("td", time(d.last_success), "nowrap"),
          el("td", `${ms(d.latency_p50_ms)} / ${ms(d.latency_p95_ms)}`, "nowrap"), el("td", errors, d.alarms.length ? "alarm" : "")],
         { "data-device": d.id },
       );
@@ -187,24 +198,27 @@ function fillSelects(overview) {
 function renderFacts(summary) {
   if (!summary) return;
   const facts = [["Model", summary.model], ["Bus / unit", `${summary.bus} / ${summary.unit}`],
-    ["State", summary.state], ["Status", formatValue(summary.status)],
+    ["State", summary.state], ["Status", shown("dd", summary.status_text, summary.status, "status")],
     ["Last answer", time(summary.last_success)],
     ["Latency p50 / p95", `${ms(summary.latency_p50_ms)} / ${ms(summary.latency_p95_ms)}`],
     ["Errors", `${summary.errors} of ${summary.requests} requests (${summary.timeouts} timeouts)`]];
   if (summary.error) facts.push(["Why offline", summary.error]);
   if (page.device && page.device.topic) facts.push(["MQTT topic", page.device.topic]);
   $("#device-facts").replaceChildren(...facts.flatMap(([term, value]) => {
-    const dd = el("dd", value);
+    const dd = value instanceof Node ? value : el("dd", value);
     if (term === "State") dd.className = `state ${summary.state}`;
     return [el("dt", term), dd];
   }));
-  renderAlarms(summary.alarms);
+  renderAlarms(summary);
 }
 
-function renderAlarms(alarms) {
+// The active alarms by the names Home Assistant shows; their keys (what MQTT clients
+// match) in the title.
+function renderAlarms({ alarms, alarm_names: names }) {
   const box = $("#device-alarms");
   box.className = alarms.length ? "alarms" : "";
-  box.textContent = alarms.length ? `Active alarms: ${alarms.join(", ")}` : "No active alarms";
+  box.textContent = alarms.length ? `Active alarms: ${names.join(", ")}` : "No active alarms";
+  box.title = alarms.join(", ");
 }
 
 function renderDevice(device) {
@@ -218,7 +232,8 @@ function valueRow(v) {
   const name = el("th", v.name);
   name.scope = "row";
   if (v.alarm) name.append(" ", el("strong", "ALARM", "badge"));
-  return row([name, el("td", formatValue(v.value, v.decimals), "num value"), v.unit || "", el("td", v.key, "key")],
+  const reading = shown("td", v.text, v.value, "num value");
+  return row([name, reading, v.unit || "", el("td", v.key, "key")],
     { "data-key": v.key, class: v.alarm ? "alarm" : "" });
 }
 
@@ -232,7 +247,7 @@ function renderValues(change) {
     }
     patchRow(old, valueRow(v));
   }
-  renderAlarms(change.alarms);
+  renderAlarms(change);
 }
 
 function renderErrors(errors) {
@@ -314,6 +329,7 @@ async function read(form) {
     address: number(form.elements.address.value), count: number(form.elements.count.value) });
   status.textContent = `unit ${data.unit} on ${data.bus}, ${data.table} ${data.address}..${data.address + data.count - 1}`;
   $("#read-result").replaceChildren(...(data.words ? wordTables(data) : [bitTable(data)]));
+  document.dispatchEvent(new CustomEvent("raw-read", { detail: { device: form.elements.device.value, data } }));
 }
 
 function table(headings, rows) {
