@@ -18,6 +18,8 @@
     GET  api/library[?q=...]             the shipped mappings, searched (bridge/web/library.py)
     POST api/add/scan|identify, api/trial   "Add a device" on a configured or a new bus
                                          (bridge/web/adding.py); each logged once: who, what
+    POST api/config/devices              Save: the device (and its new bus) written to the
+                                         config file and applied (bridge/web/saving.py)
     POST api/entity/preview|add          a raw register as a new entity of a device's
                                          mapping (bridge/web/entity.py)
 
@@ -53,6 +55,7 @@ from bridge.web.http import EventSink, EventStream, Request, Response
 from bridge.web.library import QueryError, search, shipped_rows
 from bridge.web.live import WebFeed
 from bridge.web.new_bus import AskError
+from bridge.web.saving import SaveError, Saving
 from bridge.web.views import BusWindow, changed_values, device_document, overview
 
 MAX_REQUESTS = 4  # commissioning requests from the page running at once
@@ -67,7 +70,12 @@ STATIC = {
     "/style.css": "text/css; charset=utf-8",
     "/entity.js": "text/javascript; charset=utf-8",
 }
-ADDING = {"/api/add/scan": "scan", "/api/add/identify": "identify", "/api/trial": "trial"}
+ADDING = {
+    "/api/add/scan": "scan",
+    "/api/add/identify": "identify",
+    "/api/trial": "trial",
+    "/api/config/devices": "save",
+}
 CATALOGUES = frozenset({"/api/ports", "/api/library"})
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
@@ -110,6 +118,7 @@ class BridgeState(Protocol):
     def mqtt_state(self) -> str: ...
     @property
     def mqtt_subscriptions(self) -> dict[str, str]: ...
+    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
 
 
 class WebApp:
@@ -122,6 +131,7 @@ class WebApp:
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
         self.adding = Adding(bridge)
+        self.saving = Saving(bridge, self.adding.buses)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
         self.entities = EntityRoutes(bridge)
 
@@ -323,7 +333,8 @@ class WebApp:
             data, said = await self._add_step(request, step)
         except AskError as exc:
             log.warning("web page: %s refused (%s): %d %s", step, who, exc.status, exc)
-            return _error(exc.status, str(exc))
+            more = {"diff": exc.diff} if isinstance(exc, SaveError) and exc.diff else {}
+            return _error(exc.status, str(exc), **more)
         log.info("web page: %s (%s)", said, who)
         return _json({"status": "ok", "data": data})
 
@@ -337,8 +348,13 @@ class WebApp:
             raise AskError(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
         self.running += 1
         try:
-            work = {"scan": self.adding.scan, "identify": self.adding.identify}
-            return await work.get(step, self.adding.trial)(request.body)
+            work = {
+                "scan": self.adding.scan,
+                "identify": self.adding.identify,
+                "trial": self.adding.trial,
+                "save": self.saving.add_device,
+            }
+            return await work[step](request.body)
         finally:
             self.running -= 1
 
@@ -347,8 +363,8 @@ def _json(document: object) -> Response:
     return Response(200, json.dumps(document, default=str).encode("utf-8"), _JSON)
 
 
-def _error(status: HTTPStatus, message: str) -> Response:
-    body = json.dumps({"status": "error", "error": message}).encode("utf-8")
+def _error(status: HTTPStatus, message: str, **more: str) -> Response:
+    body = json.dumps({"status": "error", "error": message, **more}).encode("utf-8")
     return Response(status, body, _JSON)
 
 
