@@ -121,7 +121,9 @@ class Saving:
         bus_id = ask.bus.get("id")
         if bus_id != ask.device.bus:
             raise SaveError(HTTPStatus.BAD_REQUEST, "bus.id: the new bus's id is device.bus")
-        await self.buses.choose(settings, self.bridge.loaded, self.bridge.engine)  # checks
+        chosen = await self.buses.choose(settings, self.bridge.loaded, self.bridge.engine)
+        if self.buses.in_use(chosen.bus):  # the bridge would open it beside a scan's
+            raise SaveError(HTTPStatus.TOO_MANY_REQUESTS, "busy: a request uses this bus now")
         try:
             return [AddBus(bus=dict(ask.bus)), AddDevice(device=device)]
         except ValueError as exc:  # pydantic's, naming the field
