@@ -355,7 +355,10 @@ class Management:
                 loaded[device_id] = self.loaded.mappings[device_id]
                 continue
             bus = self.engine.schedulers[device.bus].transport.bus
-            mapping, problems = load_device_mapping(device, bus, self.loaded.path.parent)
+            base = self.loaded.path.parent
+            mapping, problems = load_device_mapping(
+                device, bus, base, state_dir=base / self.settings.state_dir
+            )
             errors += problems
             if mapping is not None:
                 loaded[device_id] = mapping

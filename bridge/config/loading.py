@@ -37,11 +37,15 @@ from bridge.config.mqtt import MqttConfig
 from bridge.core.counters import counters_of
 from bridge.core.mapping import Mapping, format_validation_errors, load_mapping
 from bridge.core.mapping import resolve_mapping_path as _resolve
-from bridge.core.yaml_source import parse_yaml
+from bridge.core.override import EXTENDS
+from bridge.core.yaml_source import parse_yaml, read_yaml
 from bridge.errors import ConfigError, MappingError
 from bridge.sunspec import cache as sunspec_cache
 
 DEFAULT_STATE = Path("state")  # ManagementConfig.state_dir's default
+OVERRIDES = (
+    "mappings"  # under bridge.state_dir: each device's override (bridge/config/user_mapping.py)
+)
 MAX_READ_REGISTERS = 125  # a SunSpec walk's read limit unless the device's protocol says less
 
 
@@ -169,6 +173,8 @@ def load_device_mapping(
     """A device's mapping (relative paths from ``base``) and every problem with it for
     this device, as ``devices.<id>.<field>: message`` rows: the file itself, the device's
     options, a transport the model does not speak. The mapping is None if it cannot load.
+    The device's override under ``state_dir`` (bridge/config/user_mapping.py) is its
+    mapping when it exists.
     A ``mapping: sunspec`` device's is the one cached under ``state_dir`` (bridge/sunspec/
     cache.py), else one with no entity until its chain is walked (bridge/sunspec_devices.py)."""
     where = f"devices.{device.id}"
@@ -176,7 +182,9 @@ def load_device_mapping(
     if device.is_sunspec:
         return _sunspec_mapping(device, bus, state_dir or base / DEFAULT_STATE)
     try:
-        path = _resolve(device.mapping, base)
+        path = _with_override(
+            device, _resolve(device.mapping, base), state_dir or base / DEFAULT_STATE
+        )
         mapping = cache[path] if path in cache else cache.setdefault(path, load_mapping(path))
     except MappingError as exc:
         return None, [f"{where}.mapping: {exc.source}: {issue}" for issue in exc.issues]
@@ -200,6 +208,31 @@ def load_device_mapping(
     return mapping, errors
 
 
+def _with_override(device: DeviceConfig, path: Path, state_dir: Path) -> Path:
+    """The device's override file (bridge/config/user_mapping.py) when there is one, else
+    ``path``; MappingError when it extends another mapping than ``path``."""
+    override = override_path(state_dir, device.id)
+    try:
+        if not override.is_file() or override.resolve() == path.resolve():
+            return path
+    except (OSError, ValueError):  # an id no file can be named after has no override
+        return path
+    try:
+        ref = read_yaml(override).get(EXTENDS)
+        extended = _resolve(ref, override.parent) if isinstance(ref, str) else None
+    except (OSError, ValueError, AttributeError) as exc:
+        raise MappingError(str(override), [f"cannot read it: {exc}"]) from None
+    if extended is None or extended.resolve() != path.resolve():
+        raise MappingError(
+            str(override),
+            [
+                f"extends {ref!r}, not the device's mapping {device.mapping!r}: remove the "
+                "file or make it extend the device's mapping"
+            ],
+        )
+    return override
+
+
 def _sunspec_mapping(
     device: DeviceConfig, bus: SerialBus | TcpBus, state_dir: Path
 ) -> tuple[Mapping, list[str]]:
@@ -213,3 +246,8 @@ def _sunspec_mapping(
     limit = device.protocol.max_read_registers or MAX_READ_REGISTERS
     cached = sunspec_cache.load(state_dir, device.id, device.sunspec_bases, limit)
     return (cached.mapping if cached is not None else sunspec_cache.pending()), errors
+
+
+def override_path(state_dir: Path, device_id: str) -> Path:
+    """Where a device's override file lives (bridge/config/user_mapping.py)."""
+    return state_dir / OVERRIDES / f"{device_id}.yaml"

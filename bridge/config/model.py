@@ -398,7 +398,9 @@ class ManagementConfig(Strict):
     state_dir: Path = Field(
         Path("state"),
         description="folder (relative to the config file) where the bridge keeps what it "
-        "learnt of devices: the mappings built for `mapping: sunspec` devices, under sunspec/",
+        "learnt of devices: the mappings built for `mapping: sunspec` devices, under sunspec/; "
+        "the entities added on the web page, as each device's override under mappings/ "
+        "(<device id>.yaml: the device's mapping when it exists, see docs/mappings.md)",
     )
     metrics: MetricsConfig = MetricsConfig()
     web: WebConfig = WebConfig()

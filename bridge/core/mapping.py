@@ -27,6 +27,7 @@ from bridge.core.convention import name_problems
 from bridge.core.entity import Entity, Table
 from bridge.core.fingerprint import Fingerprint, check_fingerprint
 from bridge.core.library import Library, disagreement_problems
+from bridge.core.override import EXTENDS, merge_override
 from bridge.core.protocol import OptionSpec, Protocol, write_function
 from bridge.core.variant import active_entities
 from bridge.core.yaml_source import parse_yaml
@@ -239,6 +240,11 @@ def check_mapping_text(text: str, source: str, *, library: bool = False) -> Mapp
     if not isinstance(data, dict):
         top = "the file must hold a mapping (key: value) at the top"
         return MappingReport(source, None, (top,), ())
+    if EXTENDS in data:
+        try:
+            data = _extended(data, source)
+        except MappingError as exc:
+            return MappingReport(source, None, tuple(exc.issues), ())
     try:
         mapping = Mapping.model_validate(data)
     except ValidationError as exc:
@@ -249,6 +255,32 @@ def check_mapping_text(text: str, source: str, *, library: bool = False) -> Mapp
     more, warnings = _rows_of_valid_parts(data)
     warned = ([_NO_ENTRY] if "library" not in data else []) + warnings if library else []
     return MappingReport(source, None, tuple(dict.fromkeys(rows + more)), tuple(warned))
+
+
+def _extended(data: dict[str, Any], source: str) -> dict[str, Any]:
+    """The flat data of an override file (bridge/core/override.py): its base (a shipped
+    name, or a path relative to the file's folder) loaded and checked, then merged."""
+    ref = data[EXTENDS]
+    if not isinstance(ref, str) or not ref:
+        raise MappingError(source, [f"{EXTENDS}: a shipped mapping name or a .yaml path"])
+    try:
+        path = resolve_mapping_path(ref, Path(source).parent)
+        text = path.read_text(encoding="utf-8")
+        base_data = parse_yaml(text, str(path))
+    except MappingError as exc:
+        raise MappingError(source, [f"{EXTENDS}: {issue}" for issue in exc.issues]) from None
+    except (OSError, ValueError) as exc:
+        raise MappingError(source, [f"{EXTENDS}: {ref}: {exc}"]) from None
+    if not isinstance(base_data, dict) or EXTENDS in base_data:
+        raise MappingError(source, [f"{EXTENDS}: {path} extends another mapping (one level only)"])
+    report = check_mapping_text(text, str(path))
+    if report.mapping is None:
+        raise MappingError(source, [f"{EXTENDS}: {path}: {row}" for row in report.errors])
+    try:
+        base = report.mapping
+        return merge_override(base_data, base.entities, base.protocol.addressing, data)
+    except ValueError as exc:
+        raise MappingError(source, str(exc).splitlines()) from None
 
 
 def parse_mapping(text: str, source: str) -> Mapping:

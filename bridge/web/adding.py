@@ -33,6 +33,7 @@ from bridge.core.mapping import (
     shipped_library,
 )
 from bridge.core.state import published
+from bridge.core.wording import unit_sources
 from bridge.management import Management
 from bridge.modbus.commission import Found, scan, scheduler_submit
 from bridge.modbus.engine import Engine
@@ -215,10 +216,12 @@ class Adding:
 
 
 def trial_document(poller: DevicePoller, bus_id: str) -> dict[str, Any]:
-    """What a trial poll read: every published value (decoded, with its unit and name),
+    """What a trial poll read: every published value (decoded, in Home Assistant's words,
+    with its unit and name, as the device page shows it: bridge/web/views.py),
     the registers the device refused, and its requests' outcomes."""
     health, device, mapping = poller.health, poller.device, poller.mapping
-    values = [value_row(poller, key) for key in published(poller.points)]
+    units = unit_sources(poller.points)
+    values = [value_row(poller, key, units) for key in published(poller.points)]
     silent = health.requests > 0 and health.timeouts == health.requests
     return {
         "bus": bus_id,

@@ -11,8 +11,7 @@ and applied last would undo the other in the running bridge):
    to the file by hand after it is shown as a diff; then, until the file on disk loads as
    the config the bridge runs, every change is refused saying what the file holds that the
    bridge does not run (apply it first: SIGHUP or a restart; or undo it), so the page only
-   ever applies its own change. A file changed by hand that the bridge runs already (a
-   SIGHUP read it) is read again and the change made to it, with no refusal;
+   ever applies its own change;
 2. ``store.apply(change)`` for each change in turn: validated as ``check`` does, written
    atomically with a backup, comments kept;
 3. ``bridge.apply_config(loaded)`` once, with the config of the last change written: only
@@ -75,8 +74,12 @@ class Changed:
     """A change written and applied: the store's summary (no secrets) and what the
     running bridge did (``apply_config``'s answer)."""
 
-    summary: str
+    summaries: tuple[str, ...]  # one per change
     applied: dict[str, Any]
+
+    @property
+    def summary(self) -> str:
+        return "\n".join(self.summaries)
 
     @property
     def line(self) -> str:
@@ -128,7 +131,7 @@ class ConfigFile:
                 raise ConfigChangeError(
                     exc.status, f"{exc} (written and applied: {said})"
                 ) from None
-            return Changed("\n".join(w.summary for w in written), await self._run(written))
+            return Changed(tuple(w.summary for w in written), await self._run(written))
 
     async def _write(self, store: ConfigStore, change: AnyChange) -> Applied:
         try:
@@ -136,11 +139,7 @@ class ConfigFile:
         except ConfigConflictError as exc:
             await asyncio.to_thread(store.refresh)
             self._in_step = False
-            try:  # the bridge runs the file as it is now (SIGHUP): the change goes on it
-                await self._check_in_step()
-            except ConfigChangeError:
-                raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
-            return await _apply(store, change)
+            raise ConfigChangeError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
 
     async def _run(self, written: list[Applied]) -> dict[str, Any]:
         """The config of the last change written, applied to the running bridge."""

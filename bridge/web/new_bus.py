@@ -119,6 +119,10 @@ class TemporaryBuses:
                 )
         return ChosenBus(bus)
 
+    def in_use(self, bus: SerialBus | TcpBus) -> bool:
+        """Whether a request has this port or gateway open now."""
+        return _line_key(bus) in self._open
+
     @contextlib.asynccontextmanager
     async def opened(self, chosen: ChosenBus) -> AsyncIterator[BusScheduler]:
         """The chosen bus's scheduler: a configured bus's own, or the new bus opened for

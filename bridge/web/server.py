@@ -18,6 +18,10 @@
     GET  api/library[?q=...]             the shipped mappings, searched (bridge/web/library.py)
     POST api/add/scan|identify, api/trial   "Add a device" on a configured or a new bus
                                          (bridge/web/adding.py); each logged once: who, what
+    POST api/config/devices              Save: the device (and its new bus) written to the
+                                         config file and applied (bridge/web/saving.py)
+    POST api/entity/preview|add          a raw register as a new entity of a device's
+                                         mapping (bridge/web/entity.py)
     GET|POST api/config/devices/<id>...  edit or remove a configured device
                                          (bridge/web/device_edits.py)
 
@@ -33,7 +37,7 @@ import json
 import logging
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
@@ -49,10 +53,13 @@ from bridge.web.access import Access, Refusal, change_refusal
 from bridge.web.adding import Adding
 from bridge.web.config_file import ConfigFile
 from bridge.web.device_edits import DeviceEdits
+from bridge.web.entity import ROUTES as ENTITY_ROUTES
+from bridge.web.entity import EntityRoutes
 from bridge.web.http import EventSink, EventStream, Request, Response
 from bridge.web.library import QueryError, search, shipped_rows
 from bridge.web.live import WebFeed
 from bridge.web.new_bus import AskError
+from bridge.web.saving import SaveError, Saving
 from bridge.web.views import BusWindow, changed_values, device_document, overview
 
 MAX_REQUESTS = 4  # commissioning requests from the page running at once
@@ -66,8 +73,14 @@ STATIC = {
     "/add.js": "text/javascript; charset=utf-8",
     "/edit.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
+    "/entity.js": "text/javascript; charset=utf-8",
 }
-ADDING = {"/api/add/scan": "scan", "/api/add/identify": "identify", "/api/trial": "trial"}
+ADDING = {
+    "/api/add/scan": "scan",
+    "/api/add/identify": "identify",
+    "/api/trial": "trial",
+    "/api/config/devices": "save",
+}
 CATALOGUES = frozenset({"/api/ports", "/api/library"})
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
@@ -125,7 +138,9 @@ class WebApp:
         self.adding = Adding(bridge)
         self.config_file = ConfigFile(bridge)  # the one writer of the config file
         self.edits = DeviceEdits(bridge, access, self.config_file)
+        self.saving = Saving(bridge, self.adding.buses, self.config_file)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
+        self.entities = EntityRoutes(bridge)
 
     async def handle(self, request: Request) -> Response | EventStream:
         path, method = request.path, request.method
@@ -146,6 +161,8 @@ class WebApp:
             return await self._add(request, ADDING[path])
         if path in CATALOGUES and method == "GET":
             return await self._catalogue(request)
+        if path in ENTITY_ROUTES:
+            return await self._change(request, self.entities.handle)
         if method not in ("GET", "HEAD"):
             return _error(HTTPStatus.METHOD_NOT_ALLOWED, "GET only")
         return self._read(request)
@@ -263,6 +280,25 @@ class WebApp:
                     sent = time.monotonic()
                 await asyncio.sleep(SEND_GAP)
 
+    async def _change(
+        self, request: Request, run: Callable[[Request], Awaitable[Response]]
+    ) -> Response:
+        """A change from the page: a POST of JSON from the page itself, ``MAX_REQUESTS``
+        at most running with the commissioning requests."""
+        if request.method != "POST":
+            return _error(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        refusal = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            log.warning("change refused from %s: %s", request.peer, refusal.message)
+            return _error(refusal.status, refusal.message)
+        if self.running >= MAX_REQUESTS:
+            return _error(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        self.running += 1
+        try:
+            return await run(request)
+        finally:
+            self.running -= 1
+
     # --- commissioning ----------------------------------------------------------------
 
     async def _request(self, request: Request, command: str) -> Response:
@@ -306,7 +342,8 @@ class WebApp:
             data, said = await self._add_step(request, step)
         except AskError as exc:
             log.warning("web page: %s refused (%s): %d %s", step, who, exc.status, exc)
-            return _error(exc.status, str(exc))
+            more = {"diff": exc.diff} if isinstance(exc, SaveError) and exc.diff else {}
+            return _error(exc.status, str(exc), **more)
         log.info("web page: %s (%s)", said, who)
         return _json({"status": "ok", "data": data})
 
@@ -320,8 +357,13 @@ class WebApp:
             raise AskError(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
         self.running += 1
         try:
-            work = {"scan": self.adding.scan, "identify": self.adding.identify}
-            return await work.get(step, self.adding.trial)(request.body)
+            work = {
+                "scan": self.adding.scan,
+                "identify": self.adding.identify,
+                "trial": self.adding.trial,
+                "save": self.saving.add_device,
+            }
+            return await work[step](request.body)
         finally:
             self.running -= 1
 
@@ -330,8 +372,8 @@ def _json(document: object) -> Response:
     return Response(200, json.dumps(document, default=str).encode("utf-8"), _JSON)
 
 
-def _error(status: HTTPStatus, message: str) -> Response:
-    body = json.dumps({"status": "error", "error": message}).encode("utf-8")
+def _error(status: HTTPStatus, message: str, **more: str) -> Response:
+    body = json.dumps({"status": "error", "error": message, **more}).encode("utf-8")
     return Response(status, body, _JSON)
 
 

@@ -292,6 +292,10 @@ async def test_a_new_bus_serves_one_request_at_a_time_and_is_closed_after_it(
         ask = {"bus": bus, "unit": NEW_UNIT, "mapping": "nastec_vasco"}
         second = await http(s.port, "POST", TRIAL, ask)
         assert second.status == 429 and "another request uses this bus" in second.json()["error"]
+        device = {"id": "well", "bus": "gw", "unit": NEW_UNIT, "mapping": "nastec_vasco"}
+        save = {"device": device, "bus": {"id": "gw", **bus}}  # the bridge would open it too
+        saving = await http(s.port, "POST", "/api/config/devices", save)
+        assert saving.status == 429 and "a request uses this bus" in saving.json()["error"]
         done = await first
         assert done.status == 200, done.body
         assert [f["unit"] for f in done.json()["data"]["found"]] == [NEW_UNIT]

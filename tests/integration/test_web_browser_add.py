@@ -1,7 +1,8 @@
 """ "Add a device" in a real browser (headless Chromium, as tests/integration/test_web_browser.py):
 a technician picks a TCP gateway the bridge does not know yet, scans it, sees the unit
 identified with its confidence, gets the identified mapping preselected and tries it:
-the decoded values appear, with their units, and nothing was written or added.
+the decoded values appear, with their units, and nothing was written or added; then saves
+it: the config file gets it (and its bus), and the bridge polls it at once.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from bridge.modbus.simulator import Quirks
 from tests.integration.browser import CHROMIUM, Page, browser
 from tests.integration.mosquitto import Broker
 from tests.integration.test_web_add import NEW_UNIT, new_bus
-from tests.integration.web import site
+from tests.integration.test_web_save import added_lines, file_site
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)"
@@ -45,7 +46,12 @@ async def fill(page: Page, selector: str, value: str) -> None:
 async def test_a_technician_adds_a_device_from_a_scan_to_a_trial_poll(
     mosquitto: Broker, tmp_path: Path
 ) -> None:
-    async with site(mosquitto, tmp_path) as s, new_bus() as (sim, bus), browser(tmp_path) as page:
+    async with (
+        file_site(mosquitto, tmp_path) as s,
+        new_bus() as (sim, bus),
+        browser(tmp_path) as page,
+    ):
+        before = s.path.read_text()
         await page.goto(f"http://127.0.0.1:{s.port}/#/add")
         await page.until("document.querySelector('#add-bus')?.options.length >= 3")
         await page.until(f"{text('#add-mapping option')} !== ''")  # the library is listed
@@ -89,6 +95,22 @@ async def test_a_technician_adds_a_device_from_a_scan_to_a_trial_poll(
         assert status.startswith("Nastec VASCO") and "values read" in status, status
         assert not sim.writes and not s.sim.writes
         assert set(s.bridge.engine.devices) == {"pump", "starter"}
+        assert s.path.read_text() == before  # tried, not saved
+
+        # Save: the device and its new bus go to the config file and the bridge polls it
+        await page.until("!document.querySelector('#add-bus-id-field').hidden")
+        await fill(page, "#add-bus-id", "gw2")
+        await page.evaluate("document.querySelector('#add-save').click()")
+        saved = text("#add-save-status")
+        await page.until(f"{saved}.startsWith('Saved and applied')", timeout=30)
+        assert "devices added: nastec_vasco_5" in await page.evaluate(saved)
+        added = added_lines(before, s.path.read_text())  # the user's file, comments kept
+        assert "  - id: gw2" in added and f"  - id: nastec_vasco_{NEW_UNIT}" in added, added
+        await page.evaluate("document.querySelector('#add-save-status a').click()")
+        await page.until(f"{text('#device-facts dd.state')} === 'online'", timeout=20)
+        assert set(s.bridge.engine.devices) == {"pump", "starter", f"nastec_vasco_{NEW_UNIT}"}
+        assert not sim.writes and not s.sim.writes
+        await page.goto(f"http://127.0.0.1:{s.port}/#/add")
         shot = tmp_path / "web-add.png"
         await page.screenshot(shot, 1200, 900)
         assert shot.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")

@@ -276,7 +276,7 @@ async def test_the_page_reads_a_device_as_configured(mosquitto: Broker, tmp_path
         assert AUTH  # the others carry it
 
 
-async def test_a_hand_edit_the_bridge_runs_already_is_kept_under_the_page_s_change(
+async def test_a_hand_edit_the_bridge_runs_already_is_shown_then_kept_under_the_change(
     mosquitto: Broker, tmp_path: Path
 ) -> None:
     async with edit_site(mosquitto, tmp_path) as here:
@@ -285,8 +285,11 @@ async def test_a_hand_edit_the_bridge_runs_already_is_kept_under_the_page_s_chan
         here.bridge.hangup()  # SIGHUP before any page change: the bridge runs the file
         await eventually(lambda: here.bridge.loaded.config.buses[0].timeout == 0.6)
 
-        answer = await here.edit("pump", {"name": "Well pump"})
+        shown = await here.edit("pump", {"name": "Well pump"})  # the page says so, once
 
+        assert shown.status == 409, shown.body
+        assert "+    timeout: 0.6" in shown.json()["diff"]
+        answer = await here.edit("pump", {"name": "Well pump"})
         assert answer.status == 200, answer.body
         assert answer.json()["changes"] == {"restarted": ["pump"]}
         expected = by_hand.replace("name: Borehole pump   #", "name: Well pump       #")

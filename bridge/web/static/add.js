@@ -1,6 +1,6 @@
 // "Add a device" (#/add): pick a bus (or a new one), scan, see what each unit is, pick a
-// mapping from the library, try it. Uses app.js's helpers ($, el, row, api, run,
-// formatValue, number). Every request only reads; nothing is saved by trying.
+// mapping from the library, try it, save. Uses app.js's helpers ($, el, row, api, run,
+// number, valueRow). Every request before Save only reads.
 "use strict";
 
 const adding = { ports: null, found: new Map(), searched: "", timer: 0, buses: "", mappings: new Map() };
@@ -30,6 +30,9 @@ function fillAddBuses() {
 function showNewBus() {
   const kind = { [NEW_SERIAL]: "serial", [NEW_TCP]: "tcp" }[$("#add-bus").value] || "";
   for (const field of document.querySelectorAll("[data-new]")) field.hidden = field.dataset.new !== kind;
+  $("#add-bus-id-field").hidden = !kind;
+  $("#add-bus-id").value = kind === "tcp" ? "gateway" : "rs485";
+  $("#add-save").disabled = true;
   if (kind === "serial") loadPorts();
 }
 
@@ -183,19 +186,53 @@ async function tryIt() {
   const data = await addStep("api/trial", proposed());
   const table = $("#add-values");
   table.hidden = false;
-  $("tbody", table).replaceChildren(...data.values.map((v) => {
-    const name = el("th", v.name);
-    name.scope = "row";
-    return row([name, el("td", formatValue(v.value, v.decimals), "num value"), v.unit || "", el("td", v.key, "key")],
-      { "data-key": v.key, class: v.value === null ? "unread" : "" });
-  }));
+  $("tbody", table).replaceChildren(...data.values.map(valueRow));  // as the device page shows them
   status.textContent = data.note
     ? `${data.model}: ${data.note}`
     : `${data.model}: ${data.read} of ${data.values.length} values read in ${data.requests} requests`;
+  $("#add-save").disabled = false;  // tried: it may be saved now
   if (data.refused.length) {
     $("#add-refused").textContent = "Refused by the device: " +
       data.refused.map((r) => `${r.table} ${r.address}`).join(", ");
   }
+}
+
+// --- save ------------------------------------------------------------------------------
+
+// The device (and its new bus) written to the config file and applied by the bridge.
+async function save() {
+  const status = $("#add-save-status");
+  const diff = $("#add-save-diff");
+  const tried = proposed();
+  const device = { id: tried.id, bus: tried.bus, unit: tried.unit, mapping: tried.mapping, options: tried.options };
+  if (tried.name) device.name = tried.name;
+  const body = { device };
+  if (typeof tried.bus !== "string") {
+    device.bus = $("#add-bus-id").value.trim();
+    body.bus = { id: device.bus, ...tried.bus };
+  }
+  status.className = "result";
+  status.textContent = "saving…";
+  diff.hidden = true;
+  const answer = await fetch("api/config/devices", { method: "POST", credentials: "same-origin",
+    headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const data = await answer.json();
+  if (!answer.ok) {
+    status.className = "result error";
+    status.textContent = data.error;
+    if (data.diff) {  // changed on disk: what changed there, nothing overwritten
+      diff.textContent = data.diff;
+      diff.hidden = false;
+    }
+    return;
+  }
+  const applied = data.data.applied;
+  const link = el("a", `open ${device.id}`);
+  link.href = `#/device/${encodeURIComponent(device.id)}`;
+  status.replaceChildren(applied.status === "ok"
+    ? `Saved and applied (${applied.description}): `
+    : `Saved; the bridge applies it at its next start (${applied.error}): `, link);
+  $("#add-save").disabled = true;
 }
 
 // --- wiring ----------------------------------------------------------------------------
@@ -207,6 +244,14 @@ function startAdding() {
     adding.timer = setTimeout(() => searchLibrary(e.target.value).catch(() => {}), 200);
   });
   $("#add-mapping").addEventListener("change", suggestNames);
+  $("#add-save").addEventListener("click", () => {
+    $("#add-save").disabled = true;
+    save().catch((error) => {
+      $("#add-save-status").className = "result error";
+      $("#add-save-status").textContent = error.message;
+      $("#add-save").disabled = false;
+    });
+  });
   for (const id of ["#add-id", "#add-name"]) {
     $(id).addEventListener("input", () => { $(id).dataset.edited = "yes"; });
   }

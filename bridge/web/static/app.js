@@ -329,6 +329,7 @@ async function read(form) {
     address: number(form.elements.address.value), count: number(form.elements.count.value) });
   status.textContent = `unit ${data.unit} on ${data.bus}, ${data.table} ${data.address}..${data.address + data.count - 1}`;
   $("#read-result").replaceChildren(...(data.words ? wordTables(data) : [bitTable(data)]));
+  document.dispatchEvent(new CustomEvent("raw-read", { detail: { device: form.elements.device.value, data } }));
 }
 
 function table(headings, rows) {
