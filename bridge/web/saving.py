@@ -84,12 +84,14 @@ class Saving:
         a conflict, never overwritten. A config that is no file refuses edits."""
         loaded = self.bridge.loaded
         if not loaded.path.is_file():
-            self._store = ConfigStore.read_only(loaded, "not a file the page may write")
+            reason = f"built without a file ({loaded.path.name} is not there)"
+            self._store = ConfigStore.read_only(loaded, reason)
             return self._store
         try:
             self._store = await asyncio.to_thread(ConfigStore.open, loaded.path)
         except ConfigError as exc:  # unreadable now: refused at each save, with why
-            self._store = ConfigStore.read_only(loaded, f"unreadable ({exc.issues[0]})")
+            reason = f"a file the page cannot read ({exc.issues[0]})"
+            self._store = ConfigStore.read_only(loaded, reason)
         return self._store
 
     async def add_device(self, body: bytes) -> tuple[dict[str, Any], str]:
