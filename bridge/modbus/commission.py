@@ -272,6 +272,13 @@ def scheduler_submit(
 async def open_bus(bus: SerialBus | TcpBus) -> AsyncIterator[Submit]:
     """A bus of our own for the block: port or connection opened now (BusError if it
     cannot be), one scheduler serialising the frames, everything closed on exit."""
+    async with open_scheduler(bus) as scheduler:
+        yield scheduler_submit(scheduler)
+
+
+@contextlib.asynccontextmanager
+async def open_scheduler(bus: SerialBus | TcpBus) -> AsyncIterator[BusScheduler]:
+    """``open_bus``'s running scheduler itself (for a poller of its own: a trial poll)."""
     # No silent timeout after a timeout: a scan would pay it for every absent unit.
     scheduler = bus_scheduler(bus, guard_late_replies=False)
     transport = scheduler.transport
@@ -281,7 +288,7 @@ async def open_bus(bus: SerialBus | TcpBus) -> AsyncIterator[Submit]:
         # task lives exactly as long as the block: cancelled and awaited on the way out.
         runner = asyncio.create_task(scheduler.run(), name=f"bus:{bus.id}")
         try:
-            yield scheduler_submit(scheduler)
+            yield scheduler
         finally:
             runner.cancel()
             with contextlib.suppress(asyncio.CancelledError):

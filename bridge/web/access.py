@@ -79,6 +79,13 @@ class Access:
     def from_proxy(self, request: Request) -> bool:
         return _normal(request.peer) in self.proxies
 
+    def who(self, request: Request) -> str:
+        """Who sent a change, for the log: the Home Assistant user behind ingress (its
+        ``X-Remote-User-Name``, believed from the ingress proxy only), else the address."""
+        user = request.headers.get("x-remote-user-name", "") if self.from_proxy(request) else ""
+        shown = "".join(c for c in user[:64] if c.isprintable())
+        return f"{shown} via ingress" if shown else request.peer
+
     def has_token(self, request: Request) -> bool:
         if self.token is None:
             return False

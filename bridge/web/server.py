@@ -11,9 +11,15 @@
                                          ``errors`` (at once, oldest first),
                                          ``refused`` (each refusal as it happens)
     POST api/login                       {"token": ...} -> the session cookie
-    POST api/request/device/scan|read|write   the management request of the same name,
-                                         run by bridge/management.py with its limits and
-                                         guards; answered like bridge/response/<cmd>
+    POST api/request/device/scan|identify|read|write   the management request of the same
+                                         name, run by bridge/management.py with its limits
+                                         and guards; answered like bridge/response/<cmd>
+    GET  api/ports                       the host's serial ports, by-id names first
+    GET  api/library[?q=...]             the shipped mappings, searched (bridge/web/library.py)
+    POST api/add/scan|identify, api/trial   "Add a device" on a configured or a new bus
+                                         (bridge/web/adding.py); each logged once: who, what
+    POST api/config/devices              Save: the device (and its new bus) written to the
+                                         config file and applied (bridge/web/saving.py)
     POST api/entity/preview|add          a raw register as a new entity of a device's
                                          mapping (bridge/web/entity.py)
 
@@ -40,11 +46,16 @@ from bridge.config import LoadedConfig
 from bridge.core.topics import Topics
 from bridge.management import Management
 from bridge.modbus.engine import Engine
+from bridge.modbus.ports import serial_ports
 from bridge.web.access import Access, Refusal, change_refusal
+from bridge.web.adding import Adding
 from bridge.web.entity import ROUTES as ENTITY_ROUTES
 from bridge.web.entity import EntityRoutes
 from bridge.web.http import EventSink, EventStream, Request, Response
+from bridge.web.library import QueryError, search, shipped_rows
 from bridge.web.live import WebFeed
+from bridge.web.new_bus import AskError
+from bridge.web.saving import SaveError, Saving
 from bridge.web.views import BusWindow, changed_values, device_document, overview
 
 MAX_REQUESTS = 4  # commissioning requests from the page running at once
@@ -55,9 +66,17 @@ FRESH = 0.25  # seconds an overview (or a fetched device page) is served again a
 COMMISSIONING = frozenset({"device/scan", "device/identify", "device/read", "device/write"})
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
+    "/add.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
     "/entity.js": "text/javascript; charset=utf-8",
 }
+ADDING = {
+    "/api/add/scan": "scan",
+    "/api/add/identify": "identify",
+    "/api/trial": "trial",
+    "/api/config/devices": "save",
+}
+CATALOGUES = frozenset({"/api/ports", "/api/library"})
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
 if TYPE_CHECKING:
@@ -99,6 +118,7 @@ class BridgeState(Protocol):
     def mqtt_state(self) -> str: ...
     @property
     def mqtt_subscriptions(self) -> dict[str, str]: ...
+    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
 
 
 class WebApp:
@@ -110,6 +130,8 @@ class WebApp:
         self.static = static
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
+        self.adding = Adding(bridge)
+        self.saving = Saving(bridge, self.adding.buses)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
         self.entities = EntityRoutes(bridge)
 
@@ -126,6 +148,10 @@ class WebApp:
             return _error(refusal.status, refusal.message)
         if path.startswith("/api/request/"):
             return await self._request(request, path.removeprefix("/api/request/"))
+        if path in ADDING:
+            return await self._add(request, ADDING[path])
+        if path in CATALOGUES and method == "GET":
+            return await self._catalogue(request)
         if path in ENTITY_ROUTES:
             return await self._change(request, self.entities.handle)
         if method not in ("GET", "HEAD"):
@@ -285,13 +311,60 @@ class WebApp:
             self.running -= 1
         return Response(200, answer.encode("utf-8"), _JSON)
 
+    # --- adding a device ------------------------------------------------------------------
+
+    async def _catalogue(self, request: Request) -> Response:
+        """The host's serial ports, or the library searched for ``q``."""
+        if request.path == "/api/ports":
+            ports = await asyncio.to_thread(serial_ports)
+            return _json({"ports": [port.as_dict() for port in ports]})
+        rows = await asyncio.to_thread(shipped_rows)  # loaded once, off the event loop
+        try:
+            return _json(search(rows, request.query.get("q", "")))
+        except QueryError as exc:
+            who = self.access.who(request)
+            log.warning("web page: library search refused (%s): 400 %s", who, exc)
+            return _error(HTTPStatus.BAD_REQUEST, str(exc))
+
+    async def _add(self, request: Request, step: str) -> Response:
+        """One step of "Add a device"; answered and logged once (who, what, or why not)."""
+        who = self.access.who(request)
+        try:
+            data, said = await self._add_step(request, step)
+        except AskError as exc:
+            log.warning("web page: %s refused (%s): %d %s", step, who, exc.status, exc)
+            more = {"diff": exc.diff} if isinstance(exc, SaveError) and exc.diff else {}
+            return _error(exc.status, str(exc), **more)
+        log.info("web page: %s (%s)", said, who)
+        return _json({"status": "ok", "data": data})
+
+    async def _add_step(self, request: Request, step: str) -> tuple[dict[str, Any], str]:
+        if request.method != "POST":
+            raise AskError(HTTPStatus.METHOD_NOT_ALLOWED, "POST only")
+        refusal = change_refusal(request, proxied=self.access.from_proxy(request))
+        if refusal is not None:
+            raise AskError(refusal.status, refusal.message)
+        if self.running >= MAX_REQUESTS:
+            raise AskError(HTTPStatus.TOO_MANY_REQUESTS, f"busy: {self.running} requests run")
+        self.running += 1
+        try:
+            work = {
+                "scan": self.adding.scan,
+                "identify": self.adding.identify,
+                "trial": self.adding.trial,
+                "save": self.saving.add_device,
+            }
+            return await work[step](request.body)
+        finally:
+            self.running -= 1
+
 
 def _json(document: object) -> Response:
     return Response(200, json.dumps(document, default=str).encode("utf-8"), _JSON)
 
 
-def _error(status: HTTPStatus, message: str) -> Response:
-    body = json.dumps({"status": "error", "error": message}).encode("utf-8")
+def _error(status: HTTPStatus, message: str, **more: str) -> Response:
+    body = json.dumps({"status": "error", "error": message, **more}).encode("utf-8")
     return Response(status, body, _JSON)
 
 
