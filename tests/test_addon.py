@@ -28,7 +28,10 @@ import yaml
 
 from bridge import __version__
 from bridge.config import MqttConfig, load_config_data
+from bridge.config.edits import parse_change
+from bridge.config.store import ConfigStore
 from bridge.core.mapping import builtin_mapping_names
+from bridge.errors import ConfigReadOnlyError
 from bridge.mqtt import MqttClient
 from tests.conftest import BROKER_PASSWORD, BROKER_USER
 from tests.integration.harness import eventually, serving_tcp, simulator
@@ -502,6 +505,11 @@ async def test_the_addon_starts_the_bridge_on_the_supervisors_broker(
     written = (addon_dirs["tmp"] / "bridge.yaml").read_text(encoding="utf-8")
     assert BROKER_PASSWORD not in written  # handed over in the environment only
     assert yaml.safe_load(written)["mqtt"]["username"] == BROKER_USER
+    # the page does not edit this copy: its settings live in the options
+    with pytest.raises(ConfigReadOnlyError, match="the add-on's options"):
+        ConfigStore.open(addon_dirs["tmp"] / "bridge.yaml").apply(
+            parse_change({"kind": "remove_device", "id": "pump"})
+        )
 
 
 def test_no_broker_in_home_assistant_says_what_to_install(addon_dirs: dict[str, Path]) -> None:

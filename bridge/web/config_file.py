@@ -98,19 +98,16 @@ class ConfigFile:
 
     async def open(self) -> None:
         """Read the file now (the page starts serving): a later change on disk is a
-        conflict, shown as a diff. A file that cannot be read now is tried again later."""
+        conflict, shown as a diff."""
         with contextlib.suppress(ConfigChangeError):
             if (await self.store()).writable:
                 await self._check_in_step()
 
     async def store(self) -> ConfigStore:
-        """The store, opened at the first call; ConfigChangeError (500) if the file cannot
-        be read now."""
+        """The store, opened at the first call: read-only, saying why, for a config that
+        is no file or a file that cannot be read."""
         if self._store is None:
-            try:
-                self._store = await asyncio.to_thread(_open, self.bridge.loaded)
-            except ConfigError as exc:
-                raise ConfigChangeError(HTTPStatus.INTERNAL_SERVER_ERROR, str(exc)) from None
+            self._store = await asyncio.to_thread(_open, self.bridge.loaded)
         return self._store
 
     async def change(self, *changes: AnyChange) -> Changed:
@@ -186,5 +183,8 @@ async def _apply(store: ConfigStore, change: AnyChange) -> Applied:
 def _open(loaded: LoadedConfig) -> ConfigStore:
     path: Path = loaded.path
     if not path.is_file():
-        return ConfigStore.read_only(loaded, "a config built in memory (the demo's)")
-    return ConfigStore.open(path)
+        return ConfigStore.read_only(loaded, f"built without a file ({path.name} is not there)")
+    try:
+        return ConfigStore.open(path)
+    except ConfigError as exc:
+        return ConfigStore.read_only(loaded, f"a file the page cannot read ({exc.issues[0]})")

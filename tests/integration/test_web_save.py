@@ -21,7 +21,7 @@ from bridge.config import load_config
 from tests.integration.harness import cancel, eventually, serving_tcp, simulator
 from tests.integration.mosquitto import Broker
 from tests.integration.test_web_add import NEW_UNIT, ask, new_bus, web_lines
-from tests.integration.web import PUMP, STARTER, http, listening
+from tests.integration.web import PUMP, STARTER, http, listening, site
 from tests.ports import free_port
 
 SAVE = "/api/config/devices"
@@ -179,3 +179,17 @@ async def test_hostile_saves_are_refused_with_one_log_line_and_nothing_written(
             assert not list(tmp_path.glob("config.yaml.*")), row.id  # no backup either
             assert set(s.bridge.engine.devices) == devices, row.id
         assert not s.sim.writes
+
+
+@pytest.mark.asyncio
+async def test_a_config_that_is_no_file_is_not_saved_to(
+    mosquitto: Broker, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="bridge.web")
+    async with site(mosquitto, tmp_path) as s:  # its config is data: no file behind it
+        body = {"device": {"id": "x", "bus": "tcp", "unit": 9, "mapping": "soft_starter"}}
+        refused = await http(s.port, "POST", SAVE, body)
+        assert refused.status == 403
+        assert "built without a file (config.yaml is not there)" in refused.json()["error"]
+        assert not (tmp_path / "config.yaml").exists()
+        assert "x" not in s.bridge.engine.devices

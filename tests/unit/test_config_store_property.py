@@ -9,7 +9,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from bridge.config import load_config
@@ -25,7 +25,8 @@ names = st.text(
     max_size=30,
 )
 SECONDS = {"30s": 30, "2min": 120, 90: 90, 0.5: 0.5}
-UNITS = {"borehole_pump": (1, 100), "booster_starter": (101, 247)}  # never one unit
+# never one unit: the booster starts at unit 2, so the pump never moves there
+UNITS = {"borehole_pump": (3, 100), "booster_starter": (101, 247)}
 
 
 def edits(device_id: str) -> st.SearchStrategy[tuple[str, dict[str, Any]]]:
@@ -46,7 +47,15 @@ def _comments(text: str) -> list[str]:
     return [line.split("#", 1)[1] for line in text.splitlines() if "#" in line]
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# the same examples on every run (a CI run is repeatable), and no explain phase: its line
+# tracer makes a failing example minutes slow on Python 3.11
+@settings(
+    max_examples=12,
+    deadline=None,
+    derandomize=True,
+    phases=[Phase.explicit, Phase.reuse, Phase.generate, Phase.shrink],
+    suppress_health_check=[HealthCheck.too_slow],
+)
 @given(steps)
 def test_edits_keep_every_comment_and_read_back_as_set(
     plan: list[tuple[str, dict[str, Any]]],
