@@ -24,7 +24,7 @@ from bridge.config import WebConfig
 from bridge.web.live import WebFeed
 
 if TYPE_CHECKING:
-    from bridge.web.server import BridgeState
+    from bridge.web.parts import BridgeState
 
 __all__ = ["WebFeed", "serve_web"]
 log = logging.getLogger(__name__)

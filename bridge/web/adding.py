@@ -20,11 +20,11 @@ from __future__ import annotations
 import asyncio
 import json
 from http import HTTPStatus
-from typing import Annotated, Any, Protocol, TypeVar
+from typing import Annotated, Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, ValidationError
 
-from bridge.config import DeviceConfig, LoadedConfig, SerialBus, load_device_mapping
+from bridge.config import DeviceConfig, SerialBus, load_device_mapping
 from bridge.core.management_request import MAX_SCAN_TIMEOUT, MAX_UNIT, RequestError, parse_units
 from bridge.core.mapping import (
     Mapping,
@@ -34,14 +34,13 @@ from bridge.core.mapping import (
 )
 from bridge.core.state import published
 from bridge.core.wording import unit_sources
-from bridge.management import Management
 from bridge.modbus.commission import Found, scan, scheduler_submit
-from bridge.modbus.engine import Engine
 from bridge.modbus.identify import identify
 from bridge.modbus.poller import DevicePoller
 from bridge.modbus.scheduler import Priority
 from bridge.modbus.trial import TRIAL_LIMIT, trial_poll
 from bridge.web.new_bus import NEW_BUS, AskError, ChosenBus, TemporaryBuses
+from bridge.web.parts import BridgeParts
 from bridge.web.views import value_row
 
 TRIAL_ID = "trial"  # the trial device's id in the log: "trial-<id given>" or "trial"
@@ -74,17 +73,6 @@ class TrialAsk(Ask):
     options: dict[Text, Text] = Field(default_factory=dict, max_length=20)
     id: Annotated[str, StringConstraints(min_length=1, max_length=64)] | None = None
     name: Text | None = None
-
-
-class BridgeParts(Protocol):
-    """What adding reads from the running bridge."""
-
-    @property
-    def loaded(self) -> LoadedConfig: ...
-    @property
-    def engine(self) -> Engine: ...
-    @property
-    def management(self) -> Management: ...
 
 
 _Ask = TypeVar("_Ask", bound=Ask)

@@ -23,18 +23,16 @@ import json
 import logging
 from http import HTTPStatus
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 from pydantic import ValidationError
 
-from bridge.config import LoadedConfig
 from bridge.config.user_mapping import Proposed, propose, restore, write_atomic
 from bridge.core.entity_proposal import EntityProposal, entity_fields, preview
 from bridge.core.mapping import format_validation_errors
 from bridge.errors import MappingError
-from bridge.management import Management
-from bridge.modbus.engine import Engine
 from bridge.web.http import Request, Response
+from bridge.web.parts import BridgeParts
 
 ROUTES = frozenset({"/api/entity/preview", "/api/entity/add"})
 MAX_ROWS = 10  # problems answered at most (each names its field)
@@ -51,17 +49,6 @@ class RefusedError(Exception):
         super().__init__("; ".join(rows))
         self.status = status
         self.rows = [_one_line(row, ROW_LIMIT) for row in rows[:MAX_ROWS]]
-
-
-class BridgeParts(Protocol):
-    """What these routes use of the running bridge (bridge/web/server.py's BridgeState)."""
-
-    @property
-    def loaded(self) -> LoadedConfig: ...
-    @property
-    def engine(self) -> Engine: ...
-    @property
-    def management(self) -> Management: ...
 
 
 class EntityRoutes:

@@ -41,13 +41,9 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from importlib import resources
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any
 
 from bridge import __version__
-from bridge.config import LoadedConfig
-from bridge.core.topics import Topics
-from bridge.management import Management
-from bridge.modbus.engine import Engine
 from bridge.modbus.ports import serial_ports
 from bridge.web.access import Access, Refusal, change_refusal
 from bridge.web.adding import Adding
@@ -57,8 +53,8 @@ from bridge.web.entity import ROUTES as ENTITY_ROUTES
 from bridge.web.entity import EntityRoutes
 from bridge.web.http import EventSink, EventStream, Request, Response
 from bridge.web.library import QueryError, search, shipped_rows
-from bridge.web.live import WebFeed
 from bridge.web.new_bus import AskError
+from bridge.web.parts import BridgeState
 from bridge.web.saving import SaveError, Saving
 from bridge.web.views import BusWindow, changed_values, device_document, overview
 
@@ -84,9 +80,6 @@ ADDING = {
 CATALOGUES = frozenset({"/api/ports", "/api/library"})
 _INGRESS_PATH = re.compile(r"^(/[A-Za-z0-9_.~-]+)+$")
 _JSON = "application/json"
-if TYPE_CHECKING:
-    from bridge.gateway import Gateway
-
 log = logging.getLogger(__name__)
 
 
@@ -102,28 +95,6 @@ def load_static() -> StaticFiles:
     folder = resources.files(__package__) / "static"
     index = (folder / "index.html").read_text(encoding="utf-8")
     return StaticFiles(index, {path: (folder / path[1:]).read_bytes() for path in STATIC})
-
-
-class BridgeState(Protocol):
-    """What the page reads from the running bridge."""
-
-    @property
-    def loaded(self) -> LoadedConfig: ...
-    @property
-    def engine(self) -> Engine: ...
-    @property
-    def management(self) -> Management: ...
-    @property
-    def topics(self) -> Topics: ...
-    @property
-    def feed(self) -> WebFeed: ...
-    @property
-    def gateway(self) -> Gateway | None: ...
-    @property
-    def mqtt_state(self) -> str: ...
-    @property
-    def mqtt_subscriptions(self) -> dict[str, str]: ...
-    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
 
 
 class WebApp:

@@ -84,15 +84,25 @@ class Page:
         return answer["result"].get("value")
 
     async def until(self, expression: str, timeout: float = 10.0) -> Any:
-        """The value of ``expression`` once it is truthy (polled; bounded)."""
-        value = None
+        """The value of ``expression`` once it is truthy (polled; bounded). An expression
+        that throws (the element it reads is not rendered yet: a page just navigated to)
+        counts as not true yet; the last error is said if it never becomes true."""
+        value, error = None, ""
         try:
             async with asyncio.timeout(timeout):
-                while not (value := await self.evaluate(expression)):
+                while True:
+                    try:
+                        value = await self.evaluate(expression)
+                    except AssertionError as thrown:
+                        value, error = None, str(thrown)
+                    if value:
+                        break
                     await asyncio.sleep(0.1)
         except TimeoutError:
-            text = await self.evaluate("document.querySelector('main').innerText")
-            raise AssertionError(f"never true: {expression}\npage shows:\n{text}") from None
+            text = await self.evaluate("document.querySelector('main')?.innerText")
+            raise AssertionError(
+                f"never true: {expression}\n{error}\npage shows:\n{text}"
+            ) from None
         return value
 
     async def press(self, key: str, code: int) -> None:

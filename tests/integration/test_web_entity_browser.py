@@ -54,7 +54,8 @@ async def test_a_raw_register_is_added_as_an_entity_from_the_page(
         await home_assistant.subscribe(DISCOVERY)
         await page.goto(f"http://127.0.0.1:{s.port}/#/commission")
         await page.until(
-            "[...document.querySelector('#read-device').options].some(o => o.value === 'genset')"
+            "[...(document.querySelector('#read-device')?.options ?? [])]"
+            ".some(o => o.value === 'genset')"
         )
         await page.evaluate(
             "(() => { const f = document.querySelector('#read-form');"
