@@ -34,7 +34,7 @@ import asyncio
 import contextlib
 from dataclasses import dataclass
 from http import HTTPStatus
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 from bridge.config import LoadedConfig, load_config
 from bridge.config.store import AnyChange, Applied, ConfigStore
@@ -47,17 +47,10 @@ from bridge.errors import (
     ConfigWriteError,
 )
 from bridge.reconfigure import view_of
+from bridge.web.parts import BridgeState
 
 if TYPE_CHECKING:
     from pathlib import Path
-
-
-class Reconfigurable(Protocol):
-    """The running bridge as a config change sees it."""
-
-    @property
-    def loaded(self) -> LoadedConfig: ...
-    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
 
 
 class ConfigChangeError(Exception):
@@ -90,7 +83,7 @@ class Changed:
 class ConfigFile:
     """The running bridge's config file, changed one change at a time (see the module)."""
 
-    def __init__(self, bridge: Reconfigurable) -> None:
+    def __init__(self, bridge: BridgeState) -> None:
         self.bridge = bridge
         self.lock = asyncio.Lock()
         self._store: ConfigStore | None = None

@@ -30,29 +30,21 @@ from __future__ import annotations
 import json
 import logging
 from http import HTTPStatus
-from typing import Any, Protocol
+from typing import Any
 
-from bridge.config import DeviceConfig, LoadedConfig, SerialBus
+from bridge.config import DeviceConfig, SerialBus
 from bridge.config.edits import MAX_ID, parse_change
 from bridge.config.model import MAX_SERIAL_UNIT
 from bridge.errors import ConfigEditError
-from bridge.modbus.engine import Engine
 from bridge.web.access import Access, change_refusal
 from bridge.web.config_file import Changed, ConfigChangeError, ConfigFile
 from bridge.web.edit_request import CONFIRM_FOR, Confirmations, dangerous_entities, parse_edit
 from bridge.web.http import Request, Response
+from bridge.web.parts import BridgeState
 
 PREFIX = "/api/config/devices"
 _JSON = "application/json"
 log = logging.getLogger(__name__)
-
-
-class EditableBridge(Protocol):
-    @property
-    def loaded(self) -> LoadedConfig: ...
-    @property
-    def engine(self) -> Engine: ...
-    async def apply_config(self, new: LoadedConfig) -> dict[str, Any]: ...
 
 
 class ConfirmationError(ConfigChangeError):
@@ -66,7 +58,7 @@ class ConfirmationError(ConfigChangeError):
 class DeviceEdits:
     """Answers ``api/config/devices...`` (see the module)."""
 
-    def __init__(self, bridge: EditableBridge, access: Access, file: ConfigFile) -> None:
+    def __init__(self, bridge: BridgeState, access: Access, file: ConfigFile) -> None:
         self.bridge = bridge
         self.access = access
         self.file = file
