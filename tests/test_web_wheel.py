@@ -25,6 +25,7 @@ def test_the_wheel_carries_every_static_file_of_the_page(tmp_path: Path) -> None
         "bridge/web/static/index.html",
         "bridge/web/static/app.js",
         "bridge/web/static/add.js",
+        "bridge/web/static/edit.js",
         "bridge/web/static/entity.js",
         "bridge/web/static/style.css",
     }

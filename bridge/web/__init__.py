@@ -41,7 +41,7 @@ async def serve_web(settings: WebConfig, bridge: BridgeState) -> AsyncIterator[N
     from bridge.web.server import WebApp, load_static  # noqa: PLC0415
 
     app = WebApp(bridge, Access.of(settings), load_static())
-    await app.saving.open()  # the config file as the page starts: changes after it conflict
+    await app.config_file.open()  # as the bridge read it: a later change on disk is seen
     async with listening(app.handle, settings.host, settings.port, "web page"):
         log.info("web page on %s", page_url(settings))
         yield

@@ -7,10 +7,10 @@ applied to the running bridge.
 The request is checked as a trial's is (types strict, strings bounded, a shipped mapping;
 a new bus as bridge/web/new_bus.py checks one: a port the host lists, no port or gateway
 a configured bus uses); no field beyond these is taken, so a page change never turns on
-dangerous writes. The config store (bridge/config/store.py) then checks the change as ``check``
-does, writes it atomically with a backup and keeps the user's comments; a file changed
-on disk since the page opened it (``open``, as the page starts) is never overwritten
-(409, with the difference; the next save starts from the file as it is then). A new bus is
+dangerous writes. The page's one writer of the config file (bridge/web/config_file.py,
+shared with the edits) then has the config store check the change as ``check`` does,
+write it atomically with a backup and keep the user's comments; a file changed on disk
+since the page read it is never overwritten (409, with the difference). A new bus is
 written first, then the device on it. ``apply_config`` then starts only what changed: the
 other devices keep polling. The caller logs each save once: who, and the store's summary
 (secrets hidden).
@@ -18,7 +18,6 @@ other devices keep polling. The caller logs each save once: who, and the store's
 
 from __future__ import annotations
 
-import asyncio
 from http import HTTPStatus
 from typing import Annotated, Any, Protocol
 
@@ -26,11 +25,10 @@ from pydantic import Field, StringConstraints
 
 from bridge.config import LoadedConfig
 from bridge.config.edits import AddBus, AddDevice
-from bridge.config.store import Applied, ConfigStore
 from bridge.core.mapping import builtin_mapping_names
-from bridge.errors import ConfigConflictError, ConfigEditError, ConfigError, ConfigReadOnlyError
 from bridge.modbus.engine import Engine
 from bridge.web.adding import Ask, Text, parse_ask
+from bridge.web.config_file import ConfigChangeError, ConfigFile
 from bridge.web.new_bus import AskError, TemporaryBuses
 
 Id = Annotated[str, StringConstraints(min_length=1, max_length=64)]
@@ -71,41 +69,24 @@ class SaveError(AskError):
 
 
 class Saving:
-    """Saves to the running bridge's config file (read by ``open`` as the page starts)."""
+    """Saves to the running bridge's config file, through the page's one writer."""
 
-    def __init__(self, bridge: SavingBridge, buses: TemporaryBuses) -> None:
+    def __init__(self, bridge: SavingBridge, buses: TemporaryBuses, file: ConfigFile) -> None:
         self.bridge = bridge
         self.buses = buses
-        self._store: ConfigStore | None = None
-        self._lock = asyncio.Lock()  # one save at a time: written, then applied
-
-    async def open(self) -> ConfigStore:
-        """Read the config file now (as the page starts): a change on disk after this is
-        a conflict, never overwritten. A config that is no file refuses edits."""
-        loaded = self.bridge.loaded
-        if not loaded.path.is_file():
-            reason = f"built without a file ({loaded.path.name} is not there)"
-            self._store = ConfigStore.read_only(loaded, reason)
-            return self._store
-        try:
-            self._store = await asyncio.to_thread(ConfigStore.open, loaded.path)
-        except ConfigError as exc:  # unreadable now: refused at each save, with why
-            reason = f"a file the page cannot read ({exc.issues[0]})"
-            self._store = ConfigStore.read_only(loaded, reason)
-        return self._store
+        self.file = file
 
     async def add_device(self, body: bytes) -> tuple[dict[str, Any], str]:
         """Write the device (and its new bus), then apply the file; data and a log line."""
         ask = parse_ask(SaveAsk, body)
         changes = await self._changes(ask)
-        async with self._lock:
-            store = await self._opened()
-            applied = [await _apply(store, change) for change in changes]
-            answer = await self.bridge.apply_config(applied[-1].loaded)
-        summary = "; ".join(_one_line(a.summary) for a in applied)
+        try:
+            changed = await self.file.change(*changes)
+        except ConfigChangeError as exc:
+            raise SaveError(exc.status, str(exc), exc.diff) from None
+        summary = "; ".join(_one_line(s) for s in changed.summaries)
+        answer = changed.applied
         data = {"device": ask.device.id, "saved": summary, "applied": answer}
-        if answer.get("status") != "ok":
-            return data, f"saved, not applied ({answer.get('error')}): {summary}"
         return data, f"saved and applied ({answer.get('description')}): {summary}"
 
     async def _changes(self, ask: SaveAsk) -> list[AddBus | AddDevice]:
@@ -130,21 +111,6 @@ class Saving:
             return [AddBus(bus=dict(ask.bus)), AddDevice(device=device)]
         except ValueError as exc:  # pydantic's, naming the field
             raise SaveError(HTTPStatus.BAD_REQUEST, str(exc).splitlines()[-1]) from None
-
-    async def _opened(self) -> ConfigStore:
-        return self._store if self._store is not None else await self.open()
-
-
-async def _apply(store: ConfigStore, change: AddBus | AddDevice) -> Applied:
-    try:
-        return await asyncio.to_thread(store.apply, change)
-    except ConfigConflictError as exc:
-        await asyncio.to_thread(store.refresh)  # the next save starts from the file on disk
-        raise SaveError(HTTPStatus.CONFLICT, exc.message, exc.diff) from None
-    except ConfigReadOnlyError as exc:
-        raise SaveError(HTTPStatus.FORBIDDEN, exc.message) from None
-    except ConfigEditError as exc:
-        raise SaveError(HTTPStatus.BAD_REQUEST, "; ".join(exc.issues[:5])) from None
 
 
 def _one_line(summary: str) -> str:

@@ -22,6 +22,8 @@
                                          config file and applied (bridge/web/saving.py)
     POST api/entity/preview|add          a raw register as a new entity of a device's
                                          mapping (bridge/web/entity.py)
+    GET|POST api/config/devices/<id>...  edit or remove a configured device
+                                         (bridge/web/device_edits.py)
 
 Every ``api/`` route but ``login`` needs access (bridge/web/access.py); every POST must
 come from the page itself. At most ``MAX_REQUESTS`` commissioning requests run at once.
@@ -45,6 +47,8 @@ from bridge import __version__
 from bridge.modbus.ports import serial_ports
 from bridge.web.access import Access, Refusal, change_refusal
 from bridge.web.adding import Adding
+from bridge.web.config_file import ConfigFile
+from bridge.web.device_edits import DeviceEdits
 from bridge.web.entity import ROUTES as ENTITY_ROUTES
 from bridge.web.entity import EntityRoutes
 from bridge.web.http import EventSink, EventStream, Request, Response
@@ -63,6 +67,7 @@ COMMISSIONING = frozenset({"device/scan", "device/identify", "device/read", "dev
 STATIC = {
     "/app.js": "text/javascript; charset=utf-8",
     "/add.js": "text/javascript; charset=utf-8",
+    "/edit.js": "text/javascript; charset=utf-8",
     "/style.css": "text/css; charset=utf-8",
     "/entity.js": "text/javascript; charset=utf-8",
 }
@@ -102,7 +107,9 @@ class WebApp:
         self.window = BusWindow()
         self.running = 0  # commissioning requests running
         self.adding = Adding(bridge)
-        self.saving = Saving(bridge, self.adding.buses)
+        self.config_file = ConfigFile(bridge)  # the one writer of the config file
+        self.edits = DeviceEdits(bridge, access, self.config_file)
+        self.saving = Saving(bridge, self.adding.buses, self.config_file)
         self._built: dict[str, tuple[float, bytes]] = {}  # documents FRESH enough to reuse
         self.entities = EntityRoutes(bridge)
 
@@ -114,6 +121,8 @@ class WebApp:
             return self._static(request)
         if path == "/api/login":
             return self._login(request)
+        if self.edits.serves(request):  # checks access itself: a refused change is logged
+            return await self.edits.handle(request)
         refusal = self.access.refusal(request)
         if refusal is not None:
             return _error(refusal.status, refusal.message)
