@@ -89,7 +89,9 @@ async def quiet(seconds: float = 1.5) -> None:
 async def online(observer: Observer, *devices: str) -> None:
     for device in devices:
         topic = f"modbus/{device}/availability"
-        await eventually(lambda t=topic: observer.retained.get(t) == b"online", timeout=10)
+        # generous: a device back from offline waits out its retry backoff, longer on a
+        # loaded machine (returns as soon as it is online)
+        await eventually(lambda t=topic: observer.retained.get(t) == b"online", timeout=30)
 
 
 @pytest.mark.asyncio
