@@ -80,7 +80,9 @@ function number(text) {
   return value;
 }
 
-async function api(path, body) {
+// A GET, or a POST of JSON: its status and its answer whatever the status (a 409 carries
+// what to confirm); the token asked for when the page has none.
+async function apiAnswer(path, body) {
   const options = { credentials: "same-origin", headers: {} };
   if (body !== undefined) {
     options.method = "POST";
@@ -92,8 +94,15 @@ async function api(path, body) {
     showLogin();
     throw new Error("this page needs its token");
   }
-  const data = await answer.json();
-  if (!answer.ok && data.error) throw new Error(data.error);
+  let data = {};
+  try { data = await answer.json(); } catch (error) { data = { error: `${answer.status}` }; }
+  return { status: answer.status, data };
+}
+
+// The answer of a request that succeeded; its error said otherwise.
+async function api(path, body) {
+  const { status, data } = await apiAnswer(path, body);
+  if ((status < 200 || status > 299) && data.error) throw new Error(data.error);
   return data;
 }
 

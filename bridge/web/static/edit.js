@@ -6,24 +6,6 @@
 
 const editing = { device: null };
 
-// A POST or GET whose answer is kept whatever its status (a 409 carries what to confirm).
-async function editCall(path, body) {
-  const options = { credentials: "same-origin", headers: {} };
-  if (body !== undefined) {
-    options.method = "POST";
-    options.headers["Content-Type"] = "application/json";
-    options.body = JSON.stringify(body);
-  }
-  const answer = await fetch(path, options);
-  if (answer.status === 401) {
-    showLogin();
-    throw new Error("this page needs its token");
-  }
-  let data = {};
-  try { data = await answer.json(); } catch (error) { data = { error: `${answer.status}` }; }
-  return { status: answer.status, data };
-}
-
 function devicePath(id, action) {
   return `api/config/devices/${encodeURIComponent(id)}` + (action ? `/${action}` : "");
 }
@@ -34,7 +16,7 @@ async function showEdit(deviceId) {
   const panel = $("#edit");
   hideConfirm();
   $("#edit-diff").hidden = true;
-  const { status, data } = await editCall(devicePath(deviceId));
+  const { status, data } = await apiAnswer(devicePath(deviceId));
   if (status !== 200) {
     panel.hidden = true;
     editing.device = null;
@@ -92,7 +74,7 @@ async function saveEdit() {
   }
   status.textContent = "saving…";
   const path = devicePath(editing.device.id);
-  let answer = await editCall(path, fields);
+  let answer = await apiAnswer(path, fields);
   if (answer.status === 409 && answer.data.status === "confirm") {
     const asked = answer.data;
     status.textContent = "Waiting for your confirmation…";
@@ -105,7 +87,7 @@ async function saveEdit() {
       $("#edit-form").elements.dangerous.checked = false;
       return;
     }
-    answer = await editCall(path, { ...fields, confirmation: asked.token });
+    answer = await apiAnswer(path, { ...fields, confirmation: asked.token });
   }
   afterChange(answer, fields.id || editing.device.id);
 }
@@ -153,7 +135,7 @@ async function removeDevice() {
       "entities leave Home Assistant (its discovery and retained state are cleared).",
     [], "Remove");
   if (!yes) return;
-  afterChange(await editCall(devicePath(device.id, "remove"), {}));
+  afterChange(await apiAnswer(devicePath(device.id, "remove"), {}));
 }
 
 // An in-page confirmation (no window.confirm: it blocks the page): resolves true or false.
@@ -183,7 +165,7 @@ function hideConfirm() {
 // --- devices not polled ------------------------------------------------------------------
 
 async function showNotPolled() {
-  const { status, data } = await editCall("api/config/devices");
+  const { status, data } = await apiAnswer("api/config/devices");
   const box = $("#not-polled");
   const off = status === 200 ? data.devices.filter((d) => !d.enabled) : [];
   box.hidden = !off.length;
@@ -195,7 +177,7 @@ async function showNotPolled() {
     button.setAttribute("aria-label", `Enable ${d.display_name}`);
     button.addEventListener("click", async () => {
       button.disabled = true;
-      const answer = await editCall(devicePath(d.id), { enabled: true });
+      const answer = await apiAnswer(devicePath(d.id), { enabled: true });
       if (answer.status !== 200) item.append(el("span", ` ${answer.data.error}`, "error"));
       showNotPolled().catch(() => {});
     });
