@@ -562,6 +562,35 @@ async def test_a_broker_stalled_at_the_first_connect_gets_mqtt_5_once_it_answers
 
 
 @pytest.mark.asyncio
+async def test_the_mqtt_5_probe_on_a_real_broker_leaves_the_session_and_its_topics_alone(
+    mosquitto: Broker,
+) -> None:
+    """The probe against mosquitto (the stub above stands for brokers mosquitto cannot
+    play): it is answered, and it neither takes the session's connection over (its own
+    client id) nor leaves a will or any message behind (no will, a clean DISCONNECT)."""
+    seen: list[Message] = []
+    async with (
+        MqttClient(cfg(mosquitto.url, version="3.1.1"), will_topic=STATE) as client,
+        MqttClient(cfg(mosquitto.url), will_topic="observer/state") as observer,
+    ):
+        await observer.subscribe("#")
+
+        async def collect() -> None:
+            async for message in observer.messages():
+                seen.append(message)
+
+        task = asyncio.create_task(collect())
+        await eventually(lambda: any(m.topic == STATE for m in seen), 5)  # online, retained
+        assert await within(client.answers_5(), 15)
+        await client.publish("t/after-the-probe", "still here", qos=1)  # the session lives
+        await eventually(lambda: any(m.topic == "t/after-the-probe" for m in seen), 5)
+        task.cancel()
+    topics = [m.topic for m in seen]
+    assert set(topics) <= {STATE, "t/after-the-probe", "observer/state"}, topics
+    assert [m.payload for m in seen if m.topic == STATE] == [b"online"]
+
+
+@pytest.mark.asyncio
 async def test_a_probe_unanswered_leaves_the_3_1_1_session_alone_and_tries_later(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
